@@ -1,0 +1,133 @@
+"""The narrow interface every physics backend implements.
+
+A backend adapts one engine to armreach and holds no task logic. It is built from a
+:class:`~armreach_core.robot.RobotModel` and addresses joints and links by their URDF
+names: joint vectors are always in ``robot.joint_names`` order. Units are SI, z is up,
+and quaternions (where a backend exposes orientation) are ``(w, x, y, z)``.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from armreach_core.errors import ConfigError
+from armreach_core.robot import FloatArray, RobotModel
+
+
+@dataclass(frozen=True)
+class PhysicsConfig:
+    """Engine settings every backend must honour identically.
+
+    Attributes:
+        timestep: physics step (s); default 1/240 s.
+        substeps: physics steps per control step; default 10 (control at 24 Hz).
+        gravity: (m/s²), z up.
+        self_collision: collide non-adjacent links of the arm with each other (default off:
+            the reach task has no obstacles and the paper's arm ignores self-contact).
+        inertia_from_file: use the URDF's inertia tensors (default on) rather than ones
+            the engine derives from collision shapes.
+        ground: add a static ground plane at z = 0 that collides with the arm.
+    """
+
+    timestep: float = 1.0 / 240.0
+    substeps: int = 10
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    self_collision: bool = False
+    inertia_from_file: bool = True
+    ground: bool = True
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.timestep) and 0.0 < self.timestep <= 0.1):
+            raise ConfigError(f"timestep={self.timestep!r} s is out of range; use 0 < timestep <= 0.1")
+        if not (isinstance(self.substeps, int) and 1 <= self.substeps <= 1000):
+            raise ConfigError(f"substeps={self.substeps!r} is out of range; use an integer in [1, 1000]")
+        if len(self.gravity) != 3 or not all(math.isfinite(g) for g in self.gravity):
+            raise ConfigError(f"gravity={self.gravity!r} must be three finite numbers")
+
+    @property
+    def control_dt(self) -> float:
+        """Duration of one env step (s)."""
+        return self.timestep * self.substeps
+
+
+@dataclass(frozen=True)
+class Camera:
+    """An orbit camera for ``rgb_array`` rendering (angles in degrees, distances in m)."""
+
+    target: tuple[float, float, float] = (0.3, 0.0, 0.3)
+    distance: float = 1.45
+    yaw: float = 40.0
+    pitch: float = -22.0
+    fov: float = 50.0
+    width: int = 480
+    height: int = 360
+
+
+@dataclass(frozen=True)
+class ArmState:
+    """What the core reads from a backend after each step (base frame, SI units)."""
+
+    q: FloatArray
+    qd: FloatArray
+    ee_pos: FloatArray
+
+    def is_finite(self) -> bool:
+        return bool(np.all(np.isfinite(self.q)) and np.all(np.isfinite(self.qd)) and np.all(np.isfinite(self.ee_pos)))
+
+
+class Backend(ABC):
+    """One physics engine, one robot, one world. Subclasses register through a plugin."""
+
+    #: The name users pass as ``backend=``.
+    name: ClassVar[str]
+
+    def __init__(self, robot: RobotModel, physics: PhysicsConfig) -> None:
+        self.robot = robot
+        self.physics = physics
+
+    @abstractmethod
+    def reset_joints(self, q: npt.ArrayLike) -> None:
+        """Teleport the arm to ``q`` with zero velocity and hold it there (position targets = ``q``)."""
+
+    @abstractmethod
+    def set_joint_targets(self, q: FloatArray) -> None:
+        """Set position-control targets (rad or m), one per actuated joint."""
+
+    @abstractmethod
+    def step(self) -> None:
+        """Advance one control step: ``physics.substeps`` physics steps."""
+
+    @abstractmethod
+    def joint_state(self) -> tuple[FloatArray, FloatArray]:
+        """Joint positions and velocities of the actuated joints."""
+
+    @abstractmethod
+    def link_position(self, link: str) -> FloatArray:
+        """World position of a link's URDF frame."""
+
+    @abstractmethod
+    def add_marker(self, name: str, radius: float, rgba: tuple[float, float, float, float]) -> None:
+        """Add a visual-only sphere (no collision, no mass) called ``name``."""
+
+    @abstractmethod
+    def set_marker(self, name: str, position: FloatArray) -> None:
+        """Move marker ``name`` to ``position``."""
+
+    @abstractmethod
+    def render(self, camera: Camera) -> npt.NDArray[np.uint8]:
+        """An RGB image, shape (height, width, 3), with no display needed."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the engine. Safe to call more than once."""
+
+    def read_state(self) -> ArmState:
+        """Joint state and end-effector position in one call (backends may batch the reads)."""
+        q, qd = self.joint_state()
+        return ArmState(q=q, qd=qd, ee_pos=self.link_position(self.robot.ee_link))

@@ -1,0 +1,255 @@
+"""The Gymnasium env: a thin composition of robot + backend + task.
+
+:class:`ArmEnv` owns seeding, action handling, episode bookkeeping and the spaces; the
+engine lives behind :class:`~armreach_core.backend.Backend` and the scoring behind
+:class:`~armreach_core.task.Task`, both found through the plugin registry.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from pathlib import Path
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+import numpy.typing as npt
+
+from armreach_core.backend import ArmState, Backend, Camera, PhysicsConfig
+from armreach_core.errors import ActionError, ArmReachError, BackendUnavailableError, ConfigError
+from armreach_core.plugins import get_host
+from armreach_core.robot import RobotModel
+from armreach_core.specs import BackendSpec
+from armreach_core.task import Task
+
+JOINT_LIMIT_MODES = ("clip", "terminate")
+
+
+@functools.lru_cache(maxsize=64)
+def _robot(path: str, mtime: float, ee_link: str | None, home: tuple[float, ...] | None) -> RobotModel:
+    return RobotModel(path, ee_link=ee_link, home=home)
+
+
+def load_robot(
+    urdf: str | os.PathLike[str], ee_link: str | None = None, home: npt.ArrayLike | None = None
+) -> RobotModel:
+    """A :class:`RobotModel`, cached per (file, modification time, ee_link, home)."""
+    path = Path(urdf).expanduser()
+    mtime = path.stat().st_mtime if path.is_file() else -1.0
+    home_key = None if home is None else tuple(float(v) for v in np.asarray(home, dtype=np.float64).ravel())
+    if mtime < 0:
+        return RobotModel(path, ee_link=ee_link, home=home)  # raises the URDFError
+    return _robot(str(path.resolve()), mtime, ee_link, home_key)
+
+
+def load_backend_class(name: str) -> type[Backend]:
+    """The Backend class registered as ``name``, importing its engine."""
+    backends = get_host().registry.backends
+    spec: BackendSpec | None = backends.get(name)
+    if spec is None:
+        known = ", ".join(sorted(backends)) or "none"
+        raise BackendUnavailableError(
+            f"backend {name!r} is not installed (installed backends: {known}); backends are separate "
+            f"distributions: install it with `pip install armreach-{name}` (from a checkout: "
+            f"`pip install -e backends/{name}`)"
+        )
+    try:
+        return spec.load()
+    except ImportError as exc:
+        raise BackendUnavailableError(
+            f"backend {name!r} cannot start because {exc.name or 'a dependency'} is missing ({exc}); "
+            f"install it with `{spec.install}`"
+        ) from exc
+
+
+class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
+    """A robot arm doing a registered task on a registered backend.
+
+    See :class:`armreach_core.ArmReach6DOFEnv` for the full description of the reach
+    env; the arguments below are shared by every task.
+
+    Args:
+        task: registered task name.
+        backend: registered backend name (``"pybullet"``, ``"mujoco"``, ...).
+        urdf: path to a URDF; default the task's bundled robot.
+        ee_link: end-effector link; default the robot's.
+        render_mode: ``None`` or ``"rgb_array"``.
+        robot: a registered robot name instead of ``urdf``.
+        home: initial joint configuration (rad); default the robot's home.
+        max_joint_step: joint change (rad) for an action of 1, default 0.05.
+        timestep, substeps: physics step (s) and steps per action; default 1/240 and 10.
+        max_episode_steps: truncation (steps), default 2048.
+        joint_limit_mode: ``"clip"`` (default) clips targets into the limits;
+            ``"terminate"`` ends the episode when a target leaves them (the paper's rule).
+        self_collision, inertia_from_file: see :class:`~armreach_core.backend.PhysicsConfig`.
+        camera: a :class:`~armreach_core.backend.Camera` for rendering.
+        **task_options: passed to the task.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 24}  # noqa: RUF012 - Gymnasium's convention
+
+    def __init__(
+        self,
+        task: str = "reach",
+        backend: str = "pybullet",
+        urdf: str | os.PathLike[str] | None = None,
+        ee_link: str | None = None,
+        render_mode: str | None = None,
+        *,
+        robot: str | None = None,
+        home: npt.ArrayLike | None = None,
+        max_joint_step: float = 0.05,
+        timestep: float = 1.0 / 240.0,
+        substeps: int = 10,
+        max_episode_steps: int = 2048,
+        joint_limit_mode: str = "clip",
+        self_collision: bool = False,
+        inertia_from_file: bool = True,
+        camera: Camera | None = None,
+        **task_options: Any,
+    ) -> None:
+        registry = get_host().registry
+        if task not in registry.tasks:
+            raise ConfigError(f"unknown task {task!r}; registered tasks: {', '.join(sorted(registry.tasks)) or 'none'}")
+        task_spec = registry.tasks[task]
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ConfigError(f"render_mode={render_mode!r} is not supported; use None or 'rgb_array'")
+        if joint_limit_mode not in JOINT_LIMIT_MODES:
+            raise ConfigError(f"joint_limit_mode={joint_limit_mode!r}; use one of {JOINT_LIMIT_MODES}")
+        if not (np.isfinite(max_joint_step) and 0 < max_joint_step <= 1.0):
+            raise ConfigError(f"max_joint_step={max_joint_step!r} rad must be in (0, 1]")
+        if not (isinstance(max_episode_steps, int) and max_episode_steps >= 1):
+            raise ConfigError(f"max_episode_steps={max_episode_steps!r} must be a positive integer")
+
+        robot_name = robot or (None if urdf is not None else task_spec.robot)
+        if robot_name is not None:
+            if urdf is not None:
+                raise ConfigError("pass either urdf= or robot=, not both")
+            if robot_name not in registry.robots:
+                raise ConfigError(
+                    f"unknown robot {robot_name!r}; registered robots: {', '.join(sorted(registry.robots))}"
+                )
+            robot_spec = registry.robots[robot_name]
+            self.robot = load_robot(
+                robot_spec.urdf, ee_link or robot_spec.ee_link, home if home is not None else robot_spec.home
+            )
+            if robot_spec.target_center is not None:
+                task_options.setdefault("target_center", robot_spec.target_center)
+        else:
+            assert urdf is not None
+            self.robot = load_robot(urdf, ee_link, home)
+
+        self.task_name = task
+        self.backend_name = backend
+        self.render_mode = render_mode
+        self.max_joint_step = float(max_joint_step)
+        self.max_episode_steps = max_episode_steps
+        self.joint_limit_mode = joint_limit_mode
+        self.physics = PhysicsConfig(
+            timestep=timestep, substeps=substeps, self_collision=self_collision, inertia_from_file=inertia_from_file
+        )
+        self.camera = camera or Camera()
+        self.metadata = {**self.metadata, "render_fps": round(1.0 / self.physics.control_dt)}
+        try:
+            self.task: Task = task_spec.load()(self.robot, **task_options)
+        except TypeError as exc:
+            raise ConfigError(f"bad option for task {task!r}: {exc}") from exc
+
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.robot.dof,), dtype=np.float32)
+        self.observation_space = self.task.observation_space()
+        if isinstance(self.observation_space, gym.spaces.Dict) and "desired_goal" in self.observation_space.spaces:
+            # Only goal-conditioned envs expose these (SB3 and HER detect them by name):
+            # reward and termination for (batches of) goals; time limits never depend on goals.
+            self.compute_reward = self._goal_reward
+            self.compute_terminated = self._goal_terminated
+            self.compute_truncated = self._goal_truncated
+
+        backend_cls = load_backend_class(backend)
+        self._backend: Backend | None = backend_cls(self.robot, self.physics)
+        self.task.setup_scene(self._backend)
+        self._state: ArmState | None = None
+        self._elapsed = 0
+
+    # -- helpers -----------------------------------------------------------------------
+    @property
+    def backend(self) -> Backend:
+        """The live backend; raises once the env is closed."""
+        if self._backend is None:
+            raise ArmReachError("the env is closed; create a new one")
+        return self._backend
+
+    def _check_action(self, action: Any) -> npt.NDArray[np.float64]:
+        try:
+            arr = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ActionError(f"action {action!r} is not numeric: {exc}") from None
+        if arr.shape != (self.robot.dof,):
+            raise ActionError(
+                f"action has shape {arr.shape}, expected ({self.robot.dof},): one value in [-1, 1] per joint "
+                f"{list(self.robot.joint_names)}"
+            )
+        if not np.all(np.isfinite(arr)):
+            raise ActionError(f"action contains NaN or inf: {arr.tolist()}; the env's state is unchanged")
+        return np.clip(arr, -1.0, 1.0)
+
+    # -- Gymnasium API -----------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        super().reset(seed=seed)
+        backend = self.backend
+        backend.reset_joints(self.robot.home)
+        self.task.initialize_episode(backend, self.np_random)
+        self._state = backend.read_state()
+        self._elapsed = 0
+        evaluation = self.task.evaluate(self._state)
+        return self.task.observation(self._state), dict(evaluation.info)
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        if self._state is None:
+            raise ArmReachError("call reset() before step()")
+        delta = self._check_action(action) * self.max_joint_step
+        target = self._state.q + delta
+        violated = bool(np.any(target < self.robot.lower) or np.any(target > self.robot.upper))
+        target = self.robot.clip(target)
+        backend = self.backend
+        backend.set_joint_targets(target)
+        backend.step()
+        state = backend.read_state()
+        unstable = not state.is_finite()
+        if unstable:
+            state = ArmState(
+                q=self.robot.clip(np.nan_to_num(state.q)),
+                qd=np.nan_to_num(state.qd, posinf=0.0, neginf=0.0),
+                ee_pos=np.nan_to_num(state.ee_pos),
+            )
+        self._state = state
+        self._elapsed += 1
+        evaluation = self.task.evaluate(state)
+        limit_stop = violated and self.joint_limit_mode == "terminate"
+        terminated = evaluation.success or limit_stop or unstable
+        truncated = not terminated and self._elapsed >= self.max_episode_steps
+        info = dict(evaluation.info)
+        info["joint_limit_violation"] = violated
+        if unstable:
+            info["physics_unstable"] = True
+        return self.task.observation(state), float(evaluation.reward), terminated, truncated, info
+
+    def _goal_reward(self, achieved_goal: Any, desired_goal: Any, info: Any) -> npt.NDArray[np.float64]:
+        return self.task.compute_reward(achieved_goal, desired_goal, info)
+
+    def _goal_terminated(self, achieved_goal: Any, desired_goal: Any, info: Any) -> npt.NDArray[np.bool_]:
+        return self.task.compute_terminated(achieved_goal, desired_goal, info)
+
+    def _goal_truncated(self, achieved_goal: Any, desired_goal: Any, info: Any) -> npt.NDArray[np.bool_]:
+        return np.zeros(np.shape(np.asarray(achieved_goal))[:-1], dtype=bool)
+
+    def render(self) -> npt.NDArray[np.uint8] | None:
+        if self.render_mode != "rgb_array":
+            return None
+        return self.backend.render(self.camera)
+
+    def close(self) -> None:
+        if self._backend is not None:
+            self._backend.close()
+            self._backend = None
+        self._state = None

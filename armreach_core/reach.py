@@ -1,0 +1,163 @@
+"""The paper's reaching task.
+
+Description:
+    Move the end effector to within ``success_threshold`` (5 cm) of a target drawn at
+    random in a ball (radius 0.5 m) in front of the arm.
+
+Randomizations:
+    The target, uniformly in the ball, above ``min_target_height`` and inside the arm's
+    reachable set (see :mod:`armreach_core.workspace`), drawn with the env's generator.
+
+Success:
+    ``distance < success_threshold``; the episode then terminates.
+
+Reward:
+    ``r = -d**3 + success_bonus * [d < success_threshold]`` with ``d`` in metres.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from gymnasium import spaces
+
+from armreach_core.backend import ArmState
+from armreach_core.errors import ConfigError
+from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.task import Component, Evaluation, Scene, Task
+from armreach_core.workspace import TargetSampler
+
+TARGET_MARKER = "target"
+
+
+class ReachTask(Task):
+    """Reach a random 3D point. Options are keyword arguments of the env.
+
+    Args:
+        success_threshold: success distance (m), default 0.05.
+        success_bonus: reward added on success, default 10.
+        target_radius: radius of the target ball (m), default 0.5.
+        target_center: centre of the ball (m, base frame); default from the robot's
+            registration, else ``(0.5 R, 0, 0.5 R)`` with ``R`` the arm's reach.
+        min_target_height: lowest target height (m), default 0.05.
+        goal_conditioned: return a Dict observation (observation / achieved_goal /
+            desired_goal) for HER, default False.
+    """
+
+    name = "reach"
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        *,
+        success_threshold: float = 0.05,
+        success_bonus: float = 10.0,
+        target_radius: float = 0.5,
+        target_center: npt.ArrayLike | None = None,
+        min_target_height: float = 0.05,
+        goal_conditioned: bool = False,
+    ) -> None:
+        super().__init__(robot)
+        if not (np.isfinite(success_threshold) and success_threshold > 0):
+            raise ConfigError(f"success_threshold={success_threshold!r} must be a positive distance (m)")
+        if not np.isfinite(success_bonus):
+            raise ConfigError(f"success_bonus={success_bonus!r} must be finite")
+        self.success_threshold = float(success_threshold)
+        self.success_bonus = float(success_bonus)
+        self.goal_conditioned = bool(goal_conditioned)
+        if target_center is None:
+            from armreach_core.workspace import reachability_map
+
+            reach = reachability_map(robot).reach
+            target_center = (0.5 * reach, 0.0, 0.5 * reach)
+        self.sampler = TargetSampler(robot, target_center, target_radius, min_target_height)
+        self.target: FloatArray = self.sampler.center.copy()
+        reach = self.sampler.map.reach
+        self._components = self._layout(reach)
+        self._low = np.concatenate([c.low for c in self._components]).astype(np.float32)
+        self._high = np.concatenate([c.high for c in self._components]).astype(np.float32)
+
+    # -- spaces ------------------------------------------------------------------------
+    def _layout(self, reach: float) -> list[Component]:
+        robot, n = self.robot, self.robot.dof
+        box = np.full(3, reach + 0.1)
+        ball_low = self.sampler.center - self.sampler.radius
+        ball_high = self.sampler.center + self.sampler.radius
+        span = np.full(3, 2 * reach + 2 * self.sampler.radius + 0.2)
+        vel = 2.0 * robot.velocity_limits
+        joint = Component("joint angles", n, "rad", robot.lower, robot.upper, "θ, inside the joint limits")
+        ee = Component("end-effector position", 3, "m", -box, box, "p_e, base frame, from the engine")
+        target = Component("target position", 3, "m", ball_low, ball_high, "p_t, base frame")
+        qd = Component("joint velocities", n, "rad/s", -vel, vel, "θ̇, bounded by twice the URDF limits")
+        delta = Component("end effector to target", 3, "m", -span, span, "p_t − p_e")
+        if self.goal_conditioned:
+            return [joint, qd]
+        return [joint, ee, target, qd, delta]
+
+    def components(self) -> list[Component]:
+        """The blocks of the flat observation, in order (used for docs and bounds)."""
+        return list(self._components)
+
+    def observation_space(self) -> spaces.Space[Any]:
+        flat = spaces.Box(self._low, self._high, dtype=np.float32)
+        if not self.goal_conditioned:
+            return flat
+        reach = np.full(3, self.sampler.map.reach + 0.1, dtype=np.float32)
+        low = (self.sampler.center - self.sampler.radius).astype(np.float32)
+        high = (self.sampler.center + self.sampler.radius).astype(np.float32)
+        return spaces.Dict(
+            {
+                "observation": flat,
+                "achieved_goal": spaces.Box(-reach, reach, dtype=np.float32),
+                "desired_goal": spaces.Box(low, high, dtype=np.float32),
+            }
+        )
+
+    # -- episode -----------------------------------------------------------------------
+    def setup_scene(self, scene: Scene) -> None:
+        scene.add_marker(TARGET_MARKER, self.success_threshold, (0.9, 0.1, 0.1, 0.8))
+
+    def initialize_episode(self, scene: Scene, rng: np.random.Generator) -> None:
+        self.target = self.sampler.sample(rng)
+        scene.set_marker(TARGET_MARKER, self.target)
+
+    def observation(self, state: ArmState) -> Any:
+        if self.goal_conditioned:
+            flat = np.concatenate([state.q, state.qd])
+            return {
+                "observation": np.clip(flat, self._low, self._high).astype(np.float32),
+                "achieved_goal": state.ee_pos.astype(np.float32),
+                "desired_goal": self.target.astype(np.float32),
+            }
+        flat = np.concatenate([state.q, state.ee_pos, self.target, state.qd, self.target - state.ee_pos])
+        return np.clip(flat, self._low, self._high).astype(np.float32)
+
+    def evaluate(self, state: ArmState) -> Evaluation:
+        # Scored from the float32 goals the agent observes, so that the invariant
+        # reward == compute_reward(achieved_goal, desired_goal, info) holds exactly.
+        achieved = state.ee_pos.astype(np.float32)
+        desired = self.target.astype(np.float32)
+        distance = float(self._distance(achieved, desired))
+        success = bool(self.compute_terminated(achieved, desired, None))
+        reward = float(self.compute_reward(achieved, desired, None))
+        bonus = self.success_bonus if success else 0.0
+        info = {"distance": distance, "is_success": success, "reward_distance": reward - bonus, "reward_success": bonus}
+        return Evaluation(reward=reward, success=success, info=info)
+
+    # -- pure, batch-friendly ----------------------------------------------------------
+    def _distance(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        diff = np.asarray(achieved_goal, dtype=np.float64) - np.asarray(desired_goal, dtype=np.float64)
+        return np.asarray(np.linalg.norm(diff, axis=-1))
+
+    def compute_reward(
+        self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any
+    ) -> npt.NDArray[np.float64]:
+        distance = self._distance(achieved_goal, desired_goal)
+        return np.asarray(-(distance**3) + self.success_bonus * (distance < self.success_threshold))
+
+    def compute_terminated(
+        self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any
+    ) -> npt.NDArray[np.bool_]:
+        return np.asarray(self._distance(achieved_goal, desired_goal) < self.success_threshold)

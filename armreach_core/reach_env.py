@@ -1,0 +1,104 @@
+"""``ArmReach6DOFEnv``: the paper's reaching env, with its docstring tables built from code."""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from armreach_core.env import ArmEnv
+
+_DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
+
+    Made with ``gym.make("armreach/Reach-v0", backend="pybullet", urdf=None,
+    ee_link=None, render_mode=None)`` after ``import armreach_core``, or by calling this
+    class with the same keyword arguments.
+
+    ## Action space
+
+    ``Box(-1, 1, (n,), float32)``, one value per actuated joint (n = 6 for the bundled
+    arm). The joint position target is ``θ + a · max_joint_step`` (default 0.05 rad),
+    applied through the backend's position control for ``substeps`` physics steps
+    (default 10 × 1/240 s, so the env runs at 24 Hz). Actions outside [-1, 1] are
+    clipped; NaN, inf or a wrong shape raise :class:`~armreach_core.ActionError` and
+    leave the state untouched.
+
+    ## Observation space
+
+    ``Box(low, high, (2n + 9,), float32)``; values are clipped into the bounds below.
+    For the bundled arm (ar6):
+
+{obs_table}
+
+    With ``goal_conditioned=True`` the observation is a ``Dict`` with ``observation``
+    (joint angles, joint velocities), ``achieved_goal`` (end-effector position, m) and
+    ``desired_goal`` (target, m), and :meth:`compute_reward` works on batches (HER).
+
+    ## Rewards
+
+    ``r = -d³ + 10 · [d < 0.05]`` where ``d`` is the end-effector-to-target distance in
+    metres. ``info`` holds ``distance``, ``is_success``, ``reward_distance`` (−d³),
+    ``reward_success`` and ``joint_limit_violation``.
+
+    ## Starting state
+
+    The robot's home configuration (ar6: {home}) with zero velocity. The target is
+    uniform in a ball of radius ``target_radius`` (0.5 m) centred at ``target_center``
+    (ar6: {center} m), keeping only points at least ``min_target_height`` (0.05 m) above
+    the ground and inside the arm's reachable set computed from the URDF. All
+    randomness comes from the env's generator (``reset(seed=...)``).
+
+    ## Episode end
+
+    * Termination: success (``d < success_threshold``, 0.05 m); a non-finite physics
+      state (``info["physics_unstable"]``); with ``joint_limit_mode="terminate"``, a
+      target outside the joint limits (the paper's rule; the default ``"clip"`` clips
+      targets into the limits instead, which lets a policy learn near the limits).
+    * Truncation: ``max_episode_steps`` steps (default 2048, the paper's cap).
+
+    ## Physics
+
+    Gravity on, contacts with a ground plane on, self-collision off
+    (``self_collision=True`` turns it on, parent/child pairs excluded), inertia from the
+    URDF (``inertia_from_file=True``).
+
+    ## Arguments
+
+    See :class:`~armreach_core.env.ArmEnv`; the reach task adds ``success_threshold``,
+    ``success_bonus``, ``target_radius``, ``target_center``, ``min_target_height`` and
+    ``goal_conditioned``.
+
+    ## Version history
+
+    * v0: initial version (the paper's env with the joint-limit rule made optional).
+    """
+
+
+class ArmReach6DOFEnv(ArmEnv):
+    __doc__ = _DOC
+
+    def __init__(
+        self,
+        backend: str = "pybullet",
+        urdf: str | os.PathLike[str] | None = None,
+        ee_link: str | None = None,
+        render_mode: str | None = None,
+        **kwargs: Any,
+    ) -> None:
+        kwargs.pop("task", None)
+        super().__init__("reach", backend, urdf, ee_link, render_mode, **kwargs)
+
+
+def observation_table(components: list[Any]) -> str:
+    """A markdown table of observation components (index, name, unit, bounds)."""
+    rows = ["    | index | component | unit | low | high | notes |", "    |---|---|---|---|---|---|"]
+    start = 0
+    for comp in components:
+        stop = start + comp.size
+        index = f"{start}" if comp.size == 1 else f"{start}–{stop - 1}"
+        low = np.array2string(np.asarray(comp.low), precision=2, separator=", ")
+        high = np.array2string(np.asarray(comp.high), precision=2, separator=", ")
+        rows.append(f"    | {index} | {comp.name} | {comp.unit} | {low} | {high} | {comp.description} |")
+        start = stop
+    return "\n".join(rows)

@@ -1,0 +1,95 @@
+"""What plugins register: backends, tasks and robots, each under a unique name."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+from armreach_core.errors import PluginError
+
+if TYPE_CHECKING:
+    from armreach_core.backend import Backend
+    from armreach_core.task import Task
+
+_NAME = re.compile(r"^[a-z][a-z0-9_\-]*$")
+
+
+@dataclass(frozen=True)
+class BackendSpec:
+    """A physics backend.
+
+    Attributes:
+        name: what users pass as ``backend=``.
+        load: returns the :class:`~armreach_core.backend.Backend` subclass; it imports the
+            engine, so an ``ImportError`` here means the engine is not installed.
+        install: the command that installs what ``load`` needs (shown in errors).
+        description: one line for ``armreach plugins``.
+    """
+
+    name: str
+    load: Callable[[], type[Backend]]
+    install: str
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """A task and the Gymnasium id it is made with.
+
+    Attributes:
+        name: the task's name (``reach``).
+        env_id: the Gymnasium id (``armreach/Reach-v0``); the namespace must be ``armreach``.
+        load: returns the :class:`~armreach_core.task.Task` subclass.
+        robot: the registered robot the task uses when no ``urdf`` is given.
+        defaults: default keyword arguments of the env for this id.
+        entry_point: the env class, as ``"module:Class"``; it receives ``task=name``
+            unless it fixes the task itself.
+        description: one line for ``armreach plugins``.
+    """
+
+    name: str
+    env_id: str
+    load: Callable[[], type[Task]]
+    robot: str = "ar6"
+    defaults: Mapping[str, Any] = field(default_factory=dict)
+    entry_point: str = "armreach_core.env:ArmEnv"
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """A bundled robot description.
+
+    Attributes:
+        name: what users pass as ``robot=``.
+        urdf: path of the URDF file.
+        ee_link: the end-effector link (``None``: the tip of the chain).
+        home: initial joint configuration in the URDF's joint order (rad).
+        target_center: centre of the reach task's target sphere (m, base frame).
+        description: one line for ``armreach plugins``.
+    """
+
+    name: str
+    urdf: Path
+    ee_link: str | None = None
+    home: tuple[float, ...] | None = None
+    target_center: tuple[float, float, float] | None = None
+    description: str = ""
+
+
+Spec = BackendSpec | TaskSpec | RobotSpec
+
+
+class Register(Protocol):
+    """The callable a hook receives; call it once per spec."""
+
+    def __call__(self, spec: Any) -> None: ...
+
+
+def check_name(kind: str, name: str) -> None:
+    """Raise :class:`PluginError` unless ``name`` is a lowercase identifier."""
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise PluginError(f"{kind} name {name!r} is invalid: use lowercase letters, digits, '_' or '-'")

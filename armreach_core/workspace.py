@@ -1,0 +1,103 @@
+"""Where the arm can reach: a voxel map built from the URDF, used to sample targets.
+
+The map is the set of voxels that the end effector visits over many joint
+configurations drawn uniformly inside the limits, eroded by one voxel so that every
+kept voxel lies inside the reachable set, not on its rim. It depends on the URDF alone
+and a fixed seed, so it is identical on every backend and every run.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import numpy.typing as npt
+
+from armreach_core.errors import ConfigError
+from armreach_core.robot import FloatArray, RobotModel
+
+VOXEL = 0.04  # m
+SAMPLES = 120_000
+_MAP_SEED = 20240607
+
+
+class ReachabilityMap:
+    """Voxels (edge :data:`VOXEL`) strictly inside the end effector's reachable set."""
+
+    def __init__(self, robot: RobotModel, voxel: float = VOXEL, samples: int = SAMPLES) -> None:
+        rng = np.random.default_rng(_MAP_SEED)
+        points = np.concatenate(
+            [robot.forward_kinematics(robot.sample_configurations(rng, 20_000)) for _ in range(samples // 20_000)]
+        )
+        self.voxel = voxel
+        self.reach = float(np.max(np.linalg.norm(points, axis=1)))
+        cells = np.floor(points / voxel).astype(np.int64)
+        self.origin = cells.min(axis=0) - 1
+        shape = cells.max(axis=0) - self.origin + 2
+        occupied = np.zeros(tuple(shape), dtype=bool)
+        idx = cells - self.origin
+        occupied[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+        interior = occupied.copy()
+        for axis in range(3):
+            for shift in (-1, 1):
+                interior &= np.roll(occupied, shift, axis=axis)
+        self.grid = interior
+
+    def contains(self, points: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+        """Whether each point (shape (3,) or (n, 3)) lies in an interior voxel."""
+        pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        idx = np.floor(pts / self.voxel).astype(np.int64) - self.origin
+        inside = np.all((idx >= 0) & (idx < np.array(self.grid.shape)), axis=1)
+        result = np.zeros(len(pts), dtype=bool)
+        ok = idx[inside]
+        result[inside] = self.grid[ok[:, 0], ok[:, 1], ok[:, 2]]
+        return result
+
+
+@functools.lru_cache(maxsize=32)
+def reachability_map(robot: RobotModel) -> ReachabilityMap:
+    """The (cached) map of ``robot``."""
+    return ReachabilityMap(robot)
+
+
+class TargetSampler:
+    """Uniform targets in a ball, above a floor, and inside the reachable set.
+
+    Args:
+        robot: the arm.
+        center: centre of the ball (m, base frame).
+        radius: radius of the ball (m).
+        min_height: lowest allowed target height (m).
+    """
+
+    MAX_TRIES = 10_000
+
+    def __init__(self, robot: RobotModel, center: npt.ArrayLike, radius: float, min_height: float) -> None:
+        self.center: FloatArray = np.asarray(center, dtype=np.float64)
+        if self.center.shape != (3,) or not np.all(np.isfinite(self.center)):
+            raise ConfigError(f"target_center={center!r} must be three finite numbers (m)")
+        if not (np.isfinite(radius) and radius > 0):
+            raise ConfigError(f"target_radius={radius!r} must be a positive number (m)")
+        self.radius = float(radius)
+        self.min_height = float(min_height)
+        self.map = reachability_map(robot)
+
+    def accepts(self, points: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+        """Whether each point is a valid target."""
+        pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        in_ball = np.linalg.norm(pts - self.center, axis=1) <= self.radius
+        accepted: npt.NDArray[np.bool_] = in_ball & (pts[:, 2] >= self.min_height) & self.map.contains(pts)
+        return accepted
+
+    def sample(self, rng: np.random.Generator) -> FloatArray:
+        """One target, drawn with ``rng`` only (rejection sampling)."""
+        for _ in range(self.MAX_TRIES):
+            direction = rng.normal(size=3)
+            direction /= np.linalg.norm(direction) + 1e-12
+            point: FloatArray = self.center + direction * self.radius * rng.random() ** (1.0 / 3.0)
+            if self.accepts(point)[0]:
+                return point
+        raise ConfigError(
+            f"no reachable target found in the ball of radius {self.radius} m around {self.center.tolist()} "
+            f"above z={self.min_height} m; move target_center inside the arm's reach (about {self.map.reach:.2f} m)"
+        )

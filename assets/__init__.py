@@ -1,0 +1,1 @@
+"""Robot descriptions bundled with armreach (installed as ``armreach_core.assets``)."""

@@ -1,0 +1,1 @@
+"""PyBullet backend for armreach (registered through the ``armreach`` entry-point group)."""

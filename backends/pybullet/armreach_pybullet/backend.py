@@ -1,0 +1,201 @@
+"""PyBullet adapter: one DIRECT client per backend, joints and links by URDF name.
+
+Position control uses PyBullet's own motor (``POSITION_CONTROL``) with
+``positionGain`` :data:`POSITION_GAIN`, ``velocityGain`` :data:`VELOCITY_GAIN` and each
+joint's URDF effort limit as the maximum force. Joint damping comes from the URDF.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import logging
+import os
+import tempfile
+from collections.abc import Iterator
+
+import numpy as np
+import numpy.typing as npt
+
+from armreach_core.backend import Backend, Camera, PhysicsConfig
+from armreach_core.errors import ArmReachError
+from armreach_core.robot import FloatArray, RobotModel
+
+POSITION_GAIN = 0.2
+VELOCITY_GAIN = 1.0
+GROUND_RGBA = (0.86, 0.87, 0.89, 1.0)
+
+log = logging.getLogger("armreach.pybullet")
+_libc = ctypes.CDLL(None)
+
+
+@contextlib.contextmanager
+def _engine_output_to_log() -> Iterator[None]:
+    """Send what the C engine prints (banner, URDF warnings) to the ``armreach.pybullet`` logger."""
+    with tempfile.TemporaryFile(mode="w+b") as sink:
+        _libc.fflush(None)
+        saved = [os.dup(1), os.dup(2)]
+        try:
+            os.dup2(sink.fileno(), 1)
+            os.dup2(sink.fileno(), 2)
+            yield
+        finally:
+            _libc.fflush(None)
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for fd in saved:
+                os.close(fd)
+            sink.seek(0)
+            for line in sink.read().decode(errors="replace").splitlines():
+                if line.strip():
+                    log.debug("pybullet: %s", line.strip())
+
+
+with _engine_output_to_log():
+    import pybullet as pb
+
+
+class PyBulletBackend(Backend):
+    """The primary backend."""
+
+    name = "pybullet"
+
+    def __init__(self, robot: RobotModel, physics: PhysicsConfig) -> None:
+        super().__init__(robot, physics)
+        self._client = pb.connect(pb.DIRECT)
+        if self._client < 0:
+            raise ArmReachError("PyBullet could not start a DIRECT client")
+        self._markers: dict[str, int] = {}
+        try:
+            self._build()
+        except BaseException:
+            self.close()
+            raise
+
+    def _build(self) -> None:
+        cid, physics = self._client, self.physics
+        pb.setGravity(*physics.gravity, physicsClientId=cid)
+        pb.setTimeStep(physics.timestep, physicsClientId=cid)
+        if physics.ground:
+            shape = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=cid)
+            visual = pb.createVisualShape(
+                pb.GEOM_BOX, halfExtents=[1.5, 1.5, 0.001], rgbaColor=GROUND_RGBA, physicsClientId=cid
+            )
+            pb.createMultiBody(0.0, shape, visual, basePosition=[0, 0, 0], physicsClientId=cid)
+        flags = 0
+        if physics.inertia_from_file:
+            flags |= pb.URDF_USE_INERTIA_FROM_FILE
+        if physics.self_collision:
+            flags |= pb.URDF_USE_SELF_COLLISION | pb.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT
+        with tempfile.TemporaryDirectory(prefix="armreach-") as tmp:
+            path = os.path.join(tmp, "robot.urdf")
+            with open(path, "wb") as handle:
+                handle.write(self.robot.parsed.resolved_xml)
+            with _engine_output_to_log():
+                body = pb.loadURDF(path, useFixedBase=True, flags=flags, physicsClientId=cid)
+        if body < 0:
+            raise ArmReachError(f"PyBullet failed to load {self.robot.urdf_path}")
+        self._body = body
+        joint_index: dict[str, int] = {}
+        self._link_index: dict[str, int] = {pb.getBodyInfo(body, physicsClientId=cid)[0].decode(): -1}
+        for i in range(pb.getNumJoints(body, physicsClientId=cid)):
+            info = pb.getJointInfo(body, i, physicsClientId=cid)
+            joint_index[info[1].decode()] = i
+            self._link_index[info[12].decode()] = i
+        missing = [name for name in self.robot.joint_names if name not in joint_index]
+        if missing:
+            raise ArmReachError(f"PyBullet did not create joints {missing} of {self.robot.urdf_path}")
+        self._joints = [joint_index[name] for name in self.robot.joint_names]
+        self._ee = self._link_index[self.robot.ee_link]
+        self._forces = [j.effort for j in self.robot.joints]
+        self._kp = [POSITION_GAIN] * self.robot.dof
+        self._kd = [VELOCITY_GAIN] * self.robot.dof
+
+    # -- control -----------------------------------------------------------------------
+    def reset_joints(self, q: npt.ArrayLike) -> None:
+        cid, body = self._client, self._body
+        values = np.asarray(q, dtype=np.float64)
+        for joint, value in zip(self._joints, values, strict=True):
+            pb.resetJointState(body, joint, float(value), 0.0, physicsClientId=cid)
+        self.set_joint_targets(values)
+
+    def set_joint_targets(self, q: FloatArray) -> None:
+        pb.setJointMotorControlArray(
+            self._body,
+            self._joints,
+            pb.POSITION_CONTROL,
+            targetPositions=q.tolist(),
+            forces=self._forces,
+            positionGains=self._kp,
+            velocityGains=self._kd,
+            physicsClientId=self._client,
+        )
+
+    def step(self) -> None:
+        for _ in range(self.physics.substeps):
+            pb.stepSimulation(physicsClientId=self._client)
+
+    # -- state -------------------------------------------------------------------------
+    def joint_state(self) -> tuple[FloatArray, FloatArray]:
+        states = pb.getJointStates(self._body, self._joints, physicsClientId=self._client)
+        q = np.array([s[0] for s in states])
+        qd = np.array([s[1] for s in states])
+        return q, qd
+
+    def link_position(self, link: str) -> FloatArray:
+        try:
+            index = self._link_index[link]
+        except KeyError:
+            raise ArmReachError(f"link {link!r} is not part of {self.robot.name!r}") from None
+        if index < 0:
+            return np.array(pb.getBasePositionAndOrientation(self._body, physicsClientId=self._client)[0])
+        state = pb.getLinkState(self._body, index, computeForwardKinematics=True, physicsClientId=self._client)
+        return np.array(state[4])
+
+    # -- markers and rendering -----------------------------------------------------------
+    def add_marker(self, name: str, radius: float, rgba: tuple[float, float, float, float]) -> None:
+        if name in self._markers:
+            raise ArmReachError(f"marker {name!r} already exists")
+        visual = pb.createVisualShape(pb.GEOM_SPHERE, radius=radius, rgbaColor=rgba, physicsClientId=self._client)
+        self._markers[name] = pb.createMultiBody(
+            baseMass=0.0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=visual, physicsClientId=self._client
+        )
+
+    def set_marker(self, name: str, position: FloatArray) -> None:
+        pb.resetBasePositionAndOrientation(
+            self._markers[name], position.tolist(), [0.0, 0.0, 0.0, 1.0], physicsClientId=self._client
+        )
+
+    def render(self, camera: Camera) -> npt.NDArray[np.uint8]:
+        view = pb.computeViewMatrixFromYawPitchRoll(
+            cameraTargetPosition=list(camera.target),
+            distance=camera.distance,
+            yaw=camera.yaw,
+            pitch=camera.pitch,
+            roll=0.0,
+            upAxisIndex=2,
+            physicsClientId=self._client,
+        )
+        proj = pb.computeProjectionMatrixFOV(
+            fov=camera.fov, aspect=camera.width / camera.height, nearVal=0.05, farVal=10.0, physicsClientId=self._client
+        )
+        _, _, rgba, _, _ = pb.getCameraImage(
+            camera.width,
+            camera.height,
+            viewMatrix=view,
+            projectionMatrix=proj,
+            renderer=pb.ER_TINY_RENDERER,
+            physicsClientId=self._client,
+        )
+        image = np.asarray(rgba, dtype=np.uint8).reshape(camera.height, camera.width, 4)
+        return np.ascontiguousarray(image[:, :, :3])
+
+    def close(self) -> None:
+        if self._client >= 0:
+            with contextlib.suppress(Exception):
+                pb.disconnect(physicsClientId=self._client)
+            self._client = -1
+
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):
+            self.close()

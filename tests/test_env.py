@@ -1,0 +1,220 @@
+"""The env on every installed backend: API checks, reward cases, seeding, rendering."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+
+import armreach_core
+from armreach_core import ActionError, ArmReach6DOFEnv, ConfigError
+from armreach_core.backend import ArmState
+from tests.conftest import BACKENDS, TASK_BACKENDS
+
+pytestmark = pytest.mark.skipif(not BACKENDS, reason="no physics backend installed")
+
+
+@pytest.fixture(params=BACKENDS)
+def backend(request):
+    return request.param
+
+
+@pytest.fixture
+def env(backend):
+    env = ArmReach6DOFEnv(backend=backend)
+    yield env
+    env.close()
+
+
+@pytest.mark.parametrize(("task", "backend_name"), TASK_BACKENDS)
+def test_gymnasium_check_env(task, backend_name):
+    spec = armreach_core.get_host().registry.tasks[task]
+    env = gym.make(spec.env_id, backend=backend_name)
+    gym_check_env(env.unwrapped, skip_render_check=True)
+    env.close()
+
+
+@pytest.mark.parametrize(("task", "backend_name"), TASK_BACKENDS)
+@pytest.mark.parametrize("goal_conditioned", [False, True])
+def test_sb3_check_env(task, backend_name, goal_conditioned):
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    spec = armreach_core.get_host().registry.tasks[task]
+    env = gym.make(spec.env_id, backend=backend_name, goal_conditioned=goal_conditioned)
+    sb3_check_env(env.unwrapped, warn=True)
+    env.close()
+
+
+def test_make_and_class_build_the_same_env(backend):
+    made = gym.make("armreach/Reach-v0", backend=backend)
+    direct = ArmReach6DOFEnv(backend=backend)
+    assert isinstance(made.unwrapped, ArmReach6DOFEnv)
+    obs_a, _ = made.reset(seed=5)
+    obs_b, _ = direct.reset(seed=5)
+    np.testing.assert_array_equal(obs_a, obs_b)
+    action = np.linspace(-1, 1, 6, dtype=np.float32)
+    np.testing.assert_array_equal(made.step(action)[0], direct.step(action)[0])
+    made.close()
+    direct.close()
+
+
+def test_observation_layout(env):
+    obs, info = env.reset(seed=0)
+    robot = env.unwrapped.robot
+    assert obs.shape == (21,)
+    assert obs.dtype == np.float32
+    assert env.observation_space.contains(obs)
+    assert np.all(np.isfinite(env.observation_space.low)) and np.all(np.isfinite(env.observation_space.high))
+    q, ee, target, qd, delta = obs[:6], obs[6:9], obs[9:12], obs[12:18], obs[18:21]
+    np.testing.assert_allclose(q, robot.home, atol=1e-6)
+    np.testing.assert_allclose(ee, robot.forward_kinematics(robot.home), atol=1e-5)
+    np.testing.assert_allclose(target, env.unwrapped.task.target, atol=1e-6)
+    np.testing.assert_allclose(qd, 0.0, atol=1e-6)
+    np.testing.assert_allclose(delta, target - ee, atol=1e-5)
+    assert info["distance"] == pytest.approx(np.linalg.norm(target - ee), abs=1e-5)
+
+
+def test_reward_cases_by_hand(env):
+    env.reset(seed=0)
+    task = env.unwrapped.task
+    target = task.target.copy()
+    far = task.evaluate(ArmState(np.zeros(6), np.zeros(6), target + [0.1, 0.0, 0.0]))
+    assert far.reward == pytest.approx(-(0.1**3))
+    assert not far.success and far.info["reward_success"] == 0.0
+    near = task.evaluate(ArmState(np.zeros(6), np.zeros(6), target + [0.0, 0.04, 0.0]))
+    assert near.reward == pytest.approx(10.0 - 0.04**3)
+    assert near.success and near.info["reward_distance"] == pytest.approx(-(0.04**3))
+    edge = task.evaluate(ArmState(np.zeros(6), np.zeros(6), target + [0.0, 0.0, 0.0500001]))
+    assert not edge.success
+    # batch: the pure function gives the same numbers
+    achieved = np.stack([target + [0.1, 0, 0], target + [0, 0.04, 0]])
+    desired = np.stack([target, target])
+    np.testing.assert_allclose(task.compute_reward(achieved, desired, {}), [far.reward, near.reward], rtol=1e-5)
+    np.testing.assert_array_equal(task.compute_terminated(achieved, desired, {}), [False, True])
+    assert not hasattr(env.unwrapped, "compute_reward")  # a flat env is not a goal env
+
+
+def test_success_terminates_with_bonus(env):
+    env.reset(seed=0)
+    unwrapped = env.unwrapped
+    unwrapped.task.target = unwrapped.backend.read_state().ee_pos.copy()
+    _, reward, terminated, truncated, info = env.step(np.zeros(6, dtype=np.float32))
+    assert terminated and not truncated
+    assert info["is_success"] is True
+    assert info["distance"] < 0.05
+    assert reward == pytest.approx(10.0 - info["distance"] ** 3)
+
+
+def test_truncation_at_max_episode_steps(backend):
+    env = ArmReach6DOFEnv(backend=backend, max_episode_steps=3)
+    env.reset(seed=0)
+    flags = [env.step(np.zeros(6, dtype=np.float32))[2:4] for _ in range(3)]
+    assert flags == [(False, False), (False, False), (False, True)]
+    env.close()
+
+
+@pytest.mark.parametrize("mode", ["clip", "terminate"])
+def test_joint_limit_rule(backend, mode):
+    home = (0.0, -1.5707963, 3.1415, -1.5707963, -1.5707963, 0.0)  # elbow at its upper limit
+    env = ArmReach6DOFEnv(backend=backend, home=home, joint_limit_mode=mode)
+    env.reset(seed=0)
+    _, _, terminated, _, info = env.step(np.array([0, 0, 1, 0, 0, 0], dtype=np.float32))
+    assert info["joint_limit_violation"] is True
+    assert terminated is (mode == "terminate")
+    env.close()
+
+
+def test_paper_reward_default_and_options_are_checked(backend):
+    with pytest.raises(ConfigError, match="joint_limit_mode"):
+        ArmReach6DOFEnv(backend=backend, joint_limit_mode="bounce")
+    with pytest.raises(ConfigError, match="bad option for task"):
+        ArmReach6DOFEnv(backend=backend, no_such_option=1)
+    with pytest.raises(ConfigError, match="render_mode"):
+        ArmReach6DOFEnv(backend=backend, render_mode="human")
+
+
+def test_targets_are_in_the_ball_and_reachable(env):
+    from armreach_core import ik
+
+    task = env.unwrapped.task
+    robot = env.unwrapped.robot
+    for seed in range(40):
+        env.reset(seed=seed)
+        target = task.target
+        assert np.linalg.norm(target - task.sampler.center) <= task.sampler.radius + 1e-9
+        assert target[2] >= 0.05
+        best = min(ik.solve(robot, target, q0=q0)[1] for q0 in (robot.home, np.zeros(6), -robot.home))
+        assert best < 0.01, f"seed {seed}: target {target} not reachable (IK left {best:.3f} m)"
+
+
+def test_same_seed_and_actions_give_identical_trajectories(backend):
+    def run() -> np.ndarray:
+        env = ArmReach6DOFEnv(backend=backend)
+        obs, _ = env.reset(seed=123)
+        rng = np.random.default_rng(0)
+        out = [obs]
+        for _ in range(50):
+            out.append(env.step(rng.uniform(-1, 1, 6).astype(np.float32))[0])
+        env.close()
+        return np.array(out)
+
+    np.testing.assert_array_equal(run(), run())
+
+
+def test_bad_actions_raise_and_leave_state_untouched(env):
+    env.reset(seed=0)
+    before = env.unwrapped.backend.read_state()
+    for bad in (np.full(6, np.nan), np.array([0, 0, np.inf, 0, 0, 0]), np.zeros(5), np.zeros((2, 6)), "left"):
+        with pytest.raises(ActionError):
+            env.step(bad)
+    after = env.unwrapped.backend.read_state()
+    np.testing.assert_array_equal(before.q, after.q)
+    np.testing.assert_array_equal(before.ee_pos, after.ee_pos)
+    # out-of-range values are clipped, not rejected
+    env.step(np.full(6, 50.0))
+
+
+def test_rgb_array_shows_the_red_target(backend):
+    env = ArmReach6DOFEnv(backend=backend, render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.shape == (360, 480, 3)
+    red = (frame[..., 0] > 150) & (frame[..., 1] < 80) & (frame[..., 2] < 80)
+    assert red.sum() > 20
+    # moving the target out of view removes the red pixels: the sphere is the target
+    env.unwrapped.backend.set_marker("target", np.array([0.0, 0.0, -5.0]))
+    frame = env.render()
+    assert ((frame[..., 0] > 150) & (frame[..., 1] < 80) & (frame[..., 2] < 80)).sum() == 0
+    env.close()
+
+
+def test_goal_conditioned_reward_matches_step_reward(backend):
+    env = ArmReach6DOFEnv(backend=backend, goal_conditioned=True)
+    obs, _ = env.reset(seed=3)
+    assert set(obs) == {"observation", "achieved_goal", "desired_goal"}
+    for _ in range(5):
+        obs, reward, _, _, info = env.step(env.action_space.sample())
+        recomputed = env.compute_reward(obs["achieved_goal"], obs["desired_goal"], info)
+        assert float(recomputed) == pytest.approx(reward, abs=1e-5)
+    env.close()
+
+
+def test_xarm6_from_pybullet_data_runs(xarm_urdf, backend):
+    env = ArmReach6DOFEnv(backend=backend, urdf=xarm_urdf)
+    obs, _ = env.reset(seed=0)
+    assert env.unwrapped.robot.joint_names == ("joint1", "joint2", "joint3", "joint4", "joint5", "joint6")
+    for _ in range(20):
+        obs, *_ = env.step(env.action_space.sample())
+    assert np.all(np.isfinite(obs))
+    env.close()
+
+
+def test_step_before_reset_and_after_close(backend):
+    env = ArmReach6DOFEnv(backend=backend)
+    with pytest.raises(armreach_core.ArmReachError, match="reset"):
+        env.step(np.zeros(6))
+    env.close()
+    env.close()
+    with pytest.raises(armreach_core.ArmReachError, match="closed"):
+        env.reset()

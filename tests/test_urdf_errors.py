@@ -1,0 +1,126 @@
+"""Every bad robot description gives a URDFError that names the problem."""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+import pytest
+
+import armreach_core
+from armreach_core import URDFError
+from armreach_core.robot import RobotModel
+
+LINK = '<link name="{0}"><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>'
+JOINT = (
+    '<joint name="{0}" type="revolute"><parent link="{1}"/><child link="{2}"/>'
+    '<origin xyz="0 0 0.1"/><axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="10" velocity="1"/></joint>'
+)
+
+
+def _write(tmp_path, body: str, name: str = "robot.urdf"):
+    path = tmp_path / name
+    path.write_text(f'<?xml version="1.0"?>\n<robot name="t">{body}</robot>\n')
+    return path
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(URDFError, match="not found"):
+        RobotModel(tmp_path / "nope.urdf")
+
+
+def test_malformed_xml(tmp_path):
+    path = tmp_path / "bad.urdf"
+    path.write_text('<robot name="t"><link name="a"></robot>')
+    with pytest.raises(URDFError, match="not well-formed"):
+        RobotModel(path)
+
+
+def test_no_movable_joint(tmp_path):
+    body = LINK.format("a") + LINK.format("b")
+    body += '<joint name="j" type="fixed"><parent link="a"/><child link="b"/></joint>'
+    with pytest.raises(URDFError, match="no movable joint"):
+        RobotModel(_write(tmp_path, body))
+
+
+def test_branching_chain_is_ambiguous(tmp_path):
+    body = "".join(LINK.format(n) for n in ("base", "l1", "l2a", "l2b"))
+    body += JOINT.format("j1", "base", "l1") + JOINT.format("j2a", "l1", "l2a") + JOINT.format("j2b", "l1", "l2b")
+    path = _write(tmp_path, body)
+    with pytest.raises(URDFError, match="ambiguous.*ee_link"):
+        RobotModel(path)
+    assert RobotModel(path, ee_link="l2b").joint_names == ("j1", "j2b")
+
+
+def test_unknown_ee_link(ar6_urdf):
+    with pytest.raises(URDFError, match="'gripper' is not a link"):
+        RobotModel(ar6_urdf, ee_link="gripper")
+
+
+def test_missing_mesh(tmp_path):
+    body = '<link name="a"><visual><geometry><mesh filename="package://pkg/meshes/a.stl"/></geometry></visual></link>'
+    body += LINK.format("b") + JOINT.format("j", "a", "b")
+    with pytest.raises(URDFError, match=r"mesh file 'package://pkg/meshes/a.stl'.*not found"):
+        RobotModel(_write(tmp_path, body))
+
+
+def test_external_entity_never_reads_the_file(tmp_path):
+    # The entity points at a FIFO with no writer: opening it would block, so a parser
+    # that tried to read it would hang this thread instead of raising at once.
+    fifo = tmp_path / "secret"
+    os.mkfifo(fifo)
+    path = tmp_path / "xxe.urdf"
+    path.write_text(
+        f'<?xml version="1.0"?>\n<!DOCTYPE robot [<!ENTITY x SYSTEM "file://{fifo}">]>\n'
+        f'<robot name="&x;">{LINK.format("a")}{LINK.format("b")}{JOINT.format("j", "a", "b")}</robot>\n'
+    )
+    outcome: list[BaseException] = []
+
+    def load() -> None:
+        try:
+            RobotModel(path)
+        except BaseException as exc:
+            outcome.append(exc)
+
+    worker = threading.Thread(target=load, daemon=True)
+    worker.start()
+    worker.join(timeout=5)
+    if worker.is_alive():  # unblock the reader so the test process can exit
+        with open(fifo, "w"):
+            pass
+        pytest.fail("loading the URDF opened the file named by an external entity")
+    assert len(outcome) == 1
+    assert isinstance(outcome[0], URDFError)
+    assert "entities" in str(outcome[0])
+
+
+def test_billion_laughs_fails_fast(tmp_path):
+    lol = '<!ENTITY a "lol">' + "".join(f'<!ENTITY {chr(98 + i)} "{("&" + chr(97 + i) + ";") * 10}">' for i in range(9))
+    path = tmp_path / "bomb.urdf"
+    path.write_text(f'<?xml version="1.0"?>\n<!DOCTYPE robot [{lol}]>\n<robot name="&j;"/>\n')
+    start = time.perf_counter()
+    with pytest.raises(URDFError, match="entities"):
+        RobotModel(path)
+    assert time.perf_counter() - start < 1.0
+
+
+def test_unsupported_joint_type_on_chain(tmp_path):
+    body = LINK.format("a") + LINK.format("b")
+    body += '<joint name="j" type="floating"><parent link="a"/><child link="b"/></joint>'
+    with pytest.raises(URDFError, match="floating"):
+        RobotModel(_write(tmp_path, body))
+
+
+def test_not_a_robot(tmp_path):
+    path = tmp_path / "x.urdf"
+    path.write_text("<sdf/>")
+    with pytest.raises(URDFError, match="expected <robot>"):
+        RobotModel(path)
+
+
+def test_env_reports_urdf_errors_and_errors_share_a_base(tmp_path):
+    with pytest.raises(armreach_core.ArmReachError):
+        armreach_core.ArmReach6DOFEnv(urdf=tmp_path / "missing.urdf")
+    assert issubclass(URDFError, armreach_core.ArmReachError)
+    assert issubclass(armreach_core.BackendUnavailableError, armreach_core.ArmReachError)
