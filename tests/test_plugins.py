@@ -1,0 +1,187 @@
+"""The plugin seam: in-process plugins, duplicates, broken plugins, the CLI listing."""
+
+from __future__ import annotations
+
+import json
+from importlib.metadata import EntryPoint
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import armreach_core
+from armreach_core import PluginError, RobotSpec, TaskSpec, hookimpl
+from armreach_core.cli import main
+from armreach_core.plugins import PluginHost, PluginLoadWarning
+from armreach_core.reach import ReachTask
+from tests.conftest import BACKENDS
+
+
+class FarReach(ReachTask):
+    """A throwaway task: reach with a 10 cm tolerance."""
+
+    name = "far-reach"
+
+    def __init__(self, robot, **options):
+        options.setdefault("success_threshold", 0.10)
+        super().__init__(robot, **options)
+
+
+class FarReachPlugin:
+    @hookimpl
+    def armreach_register_tasks(self, register):
+        register(TaskSpec(name="far-reach", env_id="armreach/FarReach-v0", load=lambda: FarReach))
+
+
+@pytest.fixture
+def far_reach_plugin():
+    armreach_core.register_plugin(FarReachPlugin(), name="test-far-reach")
+    yield
+    armreach_core.unregister_plugin("test-far-reach")
+
+
+def test_builtins_arrive_through_entry_points():
+    host = armreach_core.get_host()
+    owners = host.registry.owners
+    assert owners[("task", "reach")] == "armreach"
+    assert owners[("robot", "ar6")] == "armreach"
+    assert "reach" in armreach_core.available_tasks()
+    assert "pybullet" in armreach_core.available_backends()
+
+
+@pytest.mark.skipif(not BACKENDS, reason="no physics backend installed")
+def test_in_process_task_plugin_is_made_with_gym(far_reach_plugin):
+    assert "far-reach" in armreach_core.available_tasks()
+    env = gym.make("armreach/FarReach-v0", backend=BACKENDS[0])
+    assert env.unwrapped.task.success_threshold == pytest.approx(0.10)
+    obs, _ = env.reset(seed=0)
+    assert np.all(np.isfinite(obs))
+    env.close()
+
+
+def test_unregistering_removes_the_task_and_its_id():
+    armreach_core.register_plugin(FarReachPlugin(), name="temporary")
+    assert "armreach/FarReach-v0" in gym.registry
+    armreach_core.unregister_plugin("temporary")
+    assert "far-reach" not in armreach_core.available_tasks()
+    assert "armreach/FarReach-v0" not in gym.registry
+
+
+def test_duplicate_name_is_rejected_loudly():
+    class Clash:
+        @hookimpl
+        def armreach_register_robots(self, register):
+            register(RobotSpec(name="ar6", urdf=armreach_core.get_host().registry.robots["ar6"].urdf))
+
+    message = "robot 'ar6' is registered twice: by plugin 'armreach' and by plugin 'clash'"
+    with pytest.raises(PluginError, match=message):
+        armreach_core.register_plugin(Clash(), name="clash")
+    # the clash left nothing behind
+    assert not armreach_core.get_host().pm.has_plugin("clash")
+    assert armreach_core.get_host().registry.owners[("robot", "ar6")] == "armreach"
+
+
+def test_duplicate_env_id_is_rejected():
+    class SameId:
+        @hookimpl
+        def armreach_register_tasks(self, register):
+            register(TaskSpec(name="other", env_id="armreach/Reach-v0", load=lambda: ReachTask))
+
+    with pytest.raises(PluginError, match="env id 'armreach/Reach-v0' is registered twice"):
+        armreach_core.register_plugin(SameId(), name="same-id")
+
+
+def test_misspelled_hook_is_caught():
+    class Typo:
+        @hookimpl
+        def armreach_register_task(self, register):  # missing "s"
+            pass
+
+    with pytest.raises(PluginError, match="armreach_register_task"):
+        armreach_core.register_plugin(Typo(), name="typo")
+
+
+def test_bad_spec_type_is_rejected():
+    class Wrong:
+        @hookimpl
+        def armreach_register_backends(self, register):
+            register(TaskSpec(name="x", env_id="armreach/X-v0", load=lambda: ReachTask))
+
+    with pytest.raises(PluginError, match="expected BackendSpec"):
+        armreach_core.register_plugin(Wrong(), name="wrong")
+
+
+def test_broken_entry_point_is_reported_and_others_load():
+    good = EntryPoint(name="armreach", value="armreach_core.default_plugins", group="armreach")
+    broken = EntryPoint(name="broken", value="armreach_no_such_module_xyz", group="armreach")
+    host = PluginHost(load_entry_points=False)
+    with pytest.warns(PluginLoadWarning, match="plugin 'broken' failed during import"):
+        host._load_entry_points([broken, good])
+    assert "reach" in host.registry.tasks
+    assert [f.name for f in host.failures] == ["broken"]
+    assert "ModuleNotFoundError" in host.failures[0].error
+
+
+def test_plugin_raising_in_a_hook_is_reported(monkeypatch):
+    import types
+
+    module = types.ModuleType("armreach_test_raiser")
+
+    @hookimpl
+    def armreach_register_tasks(register):
+        raise RuntimeError("boom")
+
+    module.armreach_register_tasks = armreach_register_tasks
+    monkeypatch.setitem(__import__("sys").modules, "armreach_test_raiser", module)
+    host = PluginHost(load_entry_points=False)
+    good = EntryPoint(name="armreach", value="armreach_core.default_plugins", group="armreach")
+    raiser = EntryPoint(name="raiser", value="armreach_test_raiser", group="armreach")
+    host._load_entry_points([good, raiser])
+    with pytest.warns(PluginLoadWarning, match="raiser.*boom"):
+        registry = host.registry
+    assert "reach" in registry.tasks
+
+
+def test_env_var_disables_plugins(monkeypatch):
+    monkeypatch.setenv("ARMREACH_DISABLE_PLUGINS", "pybullet")
+    host = PluginHost()
+    assert "pybullet" not in host.registry.backends
+    assert "reach" in host.registry.tasks
+    assert host.disabled == ["pybullet"]
+
+
+def test_unknown_backend_says_what_to_install():
+    with pytest.raises(armreach_core.BackendUnavailableError, match="pip install armreach-nosuch"):
+        armreach_core.ArmReach6DOFEnv(backend="nosuch")
+
+
+def test_backend_with_missing_engine_says_what_to_install():
+    from armreach_core import BackendSpec
+
+    def load():
+        import armreach_engine_that_is_not_installed  # noqa: F401
+
+    class Missing:
+        @hookimpl
+        def armreach_register_backends(self, register):
+            register(BackendSpec(name="ghost", load=load, install="pip install ghost-engine"))
+
+    armreach_core.register_plugin(Missing(), name="ghost-plugin")
+    try:
+        with pytest.raises(armreach_core.BackendUnavailableError, match="pip install ghost-engine"):
+            armreach_core.ArmReach6DOFEnv(backend="ghost")
+    finally:
+        armreach_core.unregister_plugin("ghost-plugin")
+
+
+def test_cli_lists_plugins_with_versions(capsys):
+    assert main(["plugins", "--json"]) == 0
+    payload = json.loads(capsys.readouterr().out)
+    by_name = {p["name"]: p for p in payload["plugins"]}
+    assert by_name["armreach"]["distribution"] == "armreach"
+    assert by_name["armreach"]["version"] == armreach_core.__version__
+    assert by_name["armreach"]["registered"]["task"] == ["reach"]
+    assert by_name["pybullet"]["registered"]["backend"] == ["pybullet"]
+    assert main(["plugins"]) == 0
+    text = capsys.readouterr().out
+    assert "armreach-pybullet" in text
