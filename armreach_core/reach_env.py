@@ -27,9 +27,16 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     ## Observation space
 
     ``Box(low, high, (2n + 9,), float32)``; values are clipped into the bounds below.
-    For the bundled arm (ar6):
+    For the bundled arm (ar6), as :func:`observation_table` builds it from the task
+    (a test keeps this table equal to the code):
 
-{obs_table}
+    | index | component | unit | low | high | notes |
+    |---|---|---|---|---|---|
+    | 0–5 | joint angles | rad | [-6.28, -6.28, -3.14, -6.28, -6.28, -6.28] | [6.28, 6.28, 3.14, 6.28, 6.28, 6.28] | θ, inside the joint limits |
+    | 6–8 | end-effector position | m | [-1.14, -1.14, -1.14] | [1.14, 1.14, 1.14] | p_e, base frame, from the engine |
+    | 9–11 | target position | m | [-0.05, -0.5 , -0.05] | [0.95, 0.5 , 0.95] | p_t, base frame |
+    | 12–17 | joint velocities | rad/s | [-6.3, -6.3, -6.3, -6.4, -6.4, -6.4] | [6.3, 6.3, 6.3, 6.4, 6.4, 6.4] | θ̇, bounded by twice the URDF limits |
+    | 18–20 | end effector to target | m | [-3.27, -3.27, -3.27] | [3.27, 3.27, 3.27] | p_t − p_e |
 
     With ``goal_conditioned=True`` the observation is a ``Dict`` with ``observation``
     (joint angles, joint velocities), ``achieved_goal`` (end-effector position, m) and
@@ -43,9 +50,9 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
 
     ## Starting state
 
-    The robot's home configuration (ar6: {home}) with zero velocity. The target is
+    The robot's home configuration (ar6: (0, −π/2, π/2, −π/2, −π/2, 0) rad) with zero velocity. The target is
     uniform in a ball of radius ``target_radius`` (0.5 m) centred at ``target_center``
-    (ar6: {center} m), keeping only points at least ``min_target_height`` (0.05 m) above
+    (ar6: (0.45, 0, 0.45) m), keeping only points at least ``min_target_height`` (0.05 m) above
     the ground and inside the arm's reachable set computed from the URDF. All
     randomness comes from the env's generator (``reset(seed=...)``).
 

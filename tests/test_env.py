@@ -218,3 +218,13 @@ def test_step_before_reset_and_after_close(backend):
     env.close()
     with pytest.raises(armreach_core.ArmReachError, match="closed"):
         env.reset()
+
+
+def test_docstring_table_matches_the_code():
+    from armreach_core.reach_env import observation_table
+
+    env = ArmReach6DOFEnv(backend=BACKENDS[0])
+    table = observation_table(env.unwrapped.task.components())
+    env.close()
+    assert table in ArmReach6DOFEnv.__doc__
+    assert "## Version history" in ArmReach6DOFEnv.__doc__
