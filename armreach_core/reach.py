@@ -27,7 +27,7 @@ from armreach_core.backend import ArmState
 from armreach_core.errors import ConfigError
 from armreach_core.robot import FloatArray, RobotModel
 from armreach_core.task import Component, Evaluation, Scene, Task
-from armreach_core.workspace import TargetSampler
+from armreach_core.workspace import TargetSampler, reachability_map
 
 TARGET_MARKER = "target"
 
@@ -68,8 +68,6 @@ class ReachTask(Task):
         self.success_bonus = float(success_bonus)
         self.goal_conditioned = bool(goal_conditioned)
         if target_center is None:
-            from armreach_core.workspace import reachability_map
-
             reach = reachability_map(robot).reach
             target_center = (0.5 * reach, 0.0, 0.5 * reach)
         self.sampler = TargetSampler(robot, target_center, target_radius, min_target_height)

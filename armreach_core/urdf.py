@@ -121,8 +121,6 @@ def read_urdf(path: str | os.PathLike[str]) -> ParsedURDF:
             load_meshes=False,
             mesh_dir=str(urdf_dir),
         )
-    except URDFError:
-        raise
     except Exception as exc:  # yourdfpy raises bare ValueError/KeyError/TypeError on bad content
         raise URDFError(f"URDF file {str(urdf_path)!r} could not be parsed: {type(exc).__name__}: {exc}") from None
     return ParsedURDF(path=urdf_path.resolve(), model=model, resolved_xml=resolved)
