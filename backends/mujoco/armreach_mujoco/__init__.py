@@ -1,0 +1,1 @@
+"""MuJoCo backend for armreach (registered through the ``armreach`` entry-point group)."""

@@ -1,0 +1,499 @@
+"""MuJoCo adapter: the model is built from the same URDF with ``mujoco.MjSpec``; joints and links by URDF name.
+
+Model
+    The resolved URDF (mesh paths already absolute) gets a ``<mujoco><compiler/></mujoco>``
+    block (``balanceinertia``, ``strippath=false``, ``discardvisual=false``,
+    ``fusestatic=false``, so every URDF link, ``tool0`` included, stays a body whose frame
+    is the link frame) and is compiled by MuJoCo's own URDF importer. Meshes MuJoCo cannot
+    read (``.dae``, ...) are converted to ``.obj`` with trimesh into a cache folder.
+    Everything else is added through MjSpec: timestep, gravity, the ``implicitfast``
+    integrator, joint damping from the URDF (URDF ``friction`` is dropped, as PyBullet
+    ignores it), one position actuator per joint, the ground plane and the markers
+    (mocap bodies with a visual-only sphere). Compiled models are cached per (URDF file,
+    modification time, physics settings, markers); envs share the read-only ``MjModel``
+    and each gets its own ``MjData``.
+
+Position control, matched to PyBullet
+    PyBullet's ``POSITION_CONTROL`` motor is a velocity-level constraint: each physics step
+    it asks for the joint velocity ``positionGain * (target - q) / dt`` (``velocityGain``
+    1 cancels the current velocity) and solves for it with at most the URDF effort. The
+    arm therefore holds its pose against gravity exactly and closes 20 % of the remaining
+    error per physics step. MuJoCo reproduces this with
+
+    * PyBullet's URDF reader gives a moving link without ``<inertial>`` (``tool0``) 1 kg and
+      1 kg m^2 on each axis, which adds ~1 kg m^2 to every joint's inertia; this backend
+      does the same (:data:`MISSING_INERTIAL`), without which the light wrists of ar6 move
+      ~50x faster than in PyBullet;
+    * a position actuator forming a velocity servo ``force = kv * (lambda * (target - q) - qd)``
+      with ``lambda = POSITION_GAIN / dt`` (``kp = kv * lambda``) and
+      ``kv = SERVO_DAMPING * M_ii(home) / dt``. A true constraint is ``kv -> inf``; but MuJoCo
+      clamps the force *before* the implicit integrator divides it by ``1 + kv dt / M``, so
+      a large ``kv`` clamps too early and chatters (bang-bang) on the wrists. ``kv = 2 M/dt``
+      was the best compromise;
+    * gravity compensation routed through the actuators (``gravcomp`` on the arm's bodies,
+      ``actuatorgravcomp`` on its joints), so the servo holds the pose like PyBullet's motor;
+      the joint's ``actuatorfrcrange`` = URDF effort bounds servo + gravity together;
+    * armature :data:`ARMATURE` = 0.01 (xarm6's wrist drifts without it; 0.1 is too much);
+      ``implicitfast`` integrator.
+
+    Matched with a script (not shipped) that drives both backends from home with the same
+    seeded sequence of targets ``q + U(-1, 1) * 0.05`` and with an IK-scripted reach for 200
+    control steps, on ar6 and pybullet_data's xarm6, over a grid of ``SERVO_DAMPING``
+    (0.5-8), ``SERVO_GAIN_SCALE`` (0.9-1.1) and ``ARMATURE`` (0-0.1). Result (end-effector
+    RMS gap): ar6 random 19 mm (the random walk touches the ground from step ~80), ar6
+    scripted 1.1 mm, xarm6 random 3.8 mm, xarm6 scripted 1.2 mm. The remaining gap comes
+    from force saturation: 0.05 rad steps saturate both motors for the first substeps, and
+    a constraint solver and a clamped force disagree there.
+
+Contacts
+    With ``self_collision`` off, the arm's collision geoms collide with the ground only
+    (contype/conaffinity bits). With it on they also collide with each other, except
+    across each URDF joint (PyBullet's ``URDF_USE_SELF_COLLISION_EXCLUDE_PARENT``); this
+    explicit exclusion also covers the base, which is welded to the world and so escapes
+    MuJoCo's own parent-child filter.
+
+Rendering
+    Offscreen through ``mujoco.Renderer``. Unless ``MUJOCO_GL`` is already set, this module
+    sets it to ``egl`` (or ``osmesa``) before importing mujoco when that library is found.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes.util
+import hashlib
+import logging
+import os
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from lxml import etree
+
+from armreach_core.backend import Backend, Camera, PhysicsConfig
+from armreach_core.errors import ArmReachError, BackendUnavailableError
+from armreach_core.robot import FloatArray, RobotModel
+
+
+def _choose_gl() -> None:
+    if "MUJOCO_GL" in os.environ:
+        return
+    if ctypes.util.find_library("EGL"):
+        os.environ["MUJOCO_GL"] = "egl"
+    elif ctypes.util.find_library("OSMesa"):
+        os.environ["MUJOCO_GL"] = "osmesa"
+
+
+_choose_gl()
+
+import mujoco  # noqa: E402 - MUJOCO_GL must be chosen first
+
+#: PyBullet's motor gains, which this backend imitates (see the module docstring).
+POSITION_GAIN = 0.2
+VELOCITY_GAIN = 1.0
+#: Servo damping kv of joint i = SERVO_DAMPING * (M_ii at home + armature) / dt.
+SERVO_DAMPING = 2.0
+#: Scale on the servo's position gain (compensates the implicit integrator's lag).
+SERVO_GAIN_SCALE = 1.0
+#: Rotor inertia added to every actuated joint (kg m^2, or kg for prismatic joints).
+ARMATURE = 0.01
+#: Gravity compensation through the actuators (PyBullet's motor holds the pose exactly).
+GRAVITY_COMPENSATION = True
+#: Mass (kg) and principal inertia (kg m^2) PyBullet gives a moving link whose URDF has no <inertial>
+#: (its URDF parser's default, with a warning); used here too so both engines move the same bodies.
+#: ``None`` keeps MuJoCo's reading (a massless link).
+MISSING_INERTIAL: tuple[float, float] | None = (1.0, 1.0)
+GROUND_RGBA = (0.86, 0.87, 0.89, 1.0)
+#: Mesh formats MuJoCo reads itself; others are converted to .obj with trimesh.
+NATIVE_MESHES = (".stl", ".obj", ".msh")
+#: Collision bits: the arm is type 2 and collides with type 1 (the ground), and with type 2
+#: too when self-collision is on.
+ARM_CONTYPE, GROUND_CONTYPE = 2, 1
+MODEL_CACHE_SIZE = 32
+
+log = logging.getLogger("armreach.mujoco")
+
+
+@dataclass(frozen=True)
+class _Marker:
+    name: str
+    radius: float
+    rgba: tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
+class _Compiled:
+    """A compiled model and the addresses the backend reads (shared by every env that uses it)."""
+
+    model: Any  # mujoco.MjModel
+    qpos: npt.NDArray[np.intp]
+    qvel: npt.NDArray[np.intp]
+    actuators: npt.NDArray[np.intp]
+    bodies: dict[str, int]
+    mocap: dict[str, int]
+
+
+_cache: OrderedDict[tuple[Any, ...], _Compiled] = OrderedDict()
+_cache_lock = threading.Lock()
+
+
+def _mesh_cache_dir() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "armreach" / "mujoco-meshes"
+
+
+def _convert_mesh(path: Path) -> Path:
+    """A copy of ``path`` MuJoCo can read (.obj), converted once with trimesh and cached."""
+    stat = path.stat()
+    digest = hashlib.sha1(f"{path}:{stat.st_mtime_ns}:{stat.st_size}".encode()).hexdigest()[:16]
+    out = _mesh_cache_dir() / f"{path.stem}-{digest}.obj"
+    if not out.is_file():
+        import trimesh
+
+        try:
+            mesh = trimesh.load(str(path), force="mesh")
+        except Exception as exc:
+            raise ArmReachError(
+                f"MuJoCo cannot read mesh {str(path)!r} and trimesh could not convert it: {exc}"
+            ) from exc
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_suffix(f".{os.getpid()}.tmp.obj")
+        mesh.export(str(tmp))
+        os.replace(tmp, out)
+    return out
+
+
+def _urdf_for_mujoco(robot: RobotModel) -> str:
+    root = etree.fromstring(robot.parsed.resolved_xml)
+    for mesh in root.iter("mesh"):
+        filename = Path(mesh.get("filename", ""))
+        if filename.suffix.lower() not in NATIVE_MESHES:
+            mesh.set("filename", str(_convert_mesh(filename)))
+    for old in root.findall("mujoco"):
+        root.remove(old)
+    block = etree.SubElement(root, "mujoco")
+    etree.SubElement(
+        block,
+        "compiler",
+        balanceinertia="true",
+        strippath="false",
+        discardvisual="false",
+        fusestatic="false",
+        angle="radian",
+    )
+    return etree.tostring(root, encoding="unicode")
+
+
+def _links_without_inertial(robot: RobotModel) -> list[str]:
+    """Links with no ``<inertial>`` that move (a movable joint lies between them and the root)."""
+    urdf = robot.parsed.model.robot
+    parent_joint = {str(j.child): j for j in urdf.joints}
+    moving: list[str] = []
+    for link in urdf.links:
+        if link.inertial is not None:
+            continue
+        name, moves = str(link.name), False
+        while name in parent_joint:
+            joint = parent_joint[name]
+            if str(joint.type) != "fixed":
+                moves = True
+                break
+            name = str(joint.parent)
+        if moves:
+            moving.append(str(link.name))
+    return moving
+
+
+def _build(robot: RobotModel, physics: PhysicsConfig, markers: tuple[_Marker, ...]) -> _Compiled:
+    spec = mujoco.MjSpec.from_string(_urdf_for_mujoco(robot))
+    spec.modelname = robot.name
+    spec.option.timestep = physics.timestep
+    spec.option.gravity = list(physics.gravity)
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.compiler.boundmass = 1e-6
+    spec.compiler.boundinertia = 1e-10
+    if not physics.inertia_from_file:
+        spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE
+        spec.compiler.inertiagrouprange = [0, 0]
+    spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
+    spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
+
+    # -- contacts
+    arm_affinity = GROUND_CONTYPE | (ARM_CONTYPE if physics.self_collision else 0)
+    for geom in spec.geoms:
+        if geom.contype or geom.conaffinity:
+            geom.contype, geom.conaffinity = ARM_CONTYPE, arm_affinity
+    if physics.self_collision:
+        body_names = {body.name for body in spec.bodies}
+        for joint in robot.parsed.model.robot.joints:
+            parent, child = str(joint.parent), str(joint.child)
+            if parent in body_names and child in body_names and "world" not in (parent, child):
+                spec.add_exclude(bodyname1=parent, bodyname2=child)
+
+    # -- links without <inertial>: PyBullet's default, except on the root and what is welded to it
+    if MISSING_INERTIAL is not None:
+        mass, inertia = MISSING_INERTIAL
+        for link in _links_without_inertial(robot):
+            body = spec.body(link)
+            if body is not None:
+                body.explicitinertial = True
+                body.mass = mass
+                body.inertia = [inertia, inertia, inertia]
+                body.ipos = [0.0, 0.0, 0.0]
+                body.iquat = [1.0, 0.0, 0.0, 0.0]
+
+    # -- joints and actuators
+    for body in spec.bodies:
+        if body.name != "world" and GRAVITY_COMPENSATION:
+            body.gravcomp = 1.0
+    for joint_spec in robot.joints:
+        joint = spec.joint(joint_spec.name)
+        if joint is None:
+            raise ArmReachError(f"MuJoCo did not create joint {joint_spec.name!r} of {robot.urdf_path}")
+        joint.damping = [joint_spec.damping, *list(joint.damping)[1:]]  # mujoco 4 adds nonlinear terms
+        joint.frictionloss = 0.0
+        joint.armature = ARMATURE
+        joint.actgravcomp = GRAVITY_COMPENSATION
+        joint.actfrclimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        joint.actfrcrange = [-joint_spec.effort, joint_spec.effort]
+        act = spec.add_actuator(name=joint_spec.name, target=joint_spec.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act.set_to_position(kp=1.0, kv=1.0)  # real gains below, once the inertia is known
+        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.forcerange = [-joint_spec.effort, joint_spec.effort]
+
+    # -- scene: a white sky like PyBullet's, a light, the ground and the markers
+    spec.add_texture(
+        name="armreach_sky",
+        type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
+        builtin=mujoco.mjtBuiltin.mjBUILTIN_FLAT,
+        rgb1=[1.0, 1.0, 1.0],
+        rgb2=[1.0, 1.0, 1.0],
+        width=16,
+        height=16,
+    )
+    world = spec.worldbody
+    world.add_light(pos=[0.0, -0.5, 3.0], dir=[0.0, 0.2, -1.0], diffuse=[0.5, 0.5, 0.5], castshadow=False)
+    if physics.ground:
+        world.add_geom(
+            name="armreach_ground",
+            type=mujoco.mjtGeom.mjGEOM_PLANE,
+            size=[1.5, 1.5, 0.01],
+            rgba=list(GROUND_RGBA),
+            contype=GROUND_CONTYPE,
+            conaffinity=ARM_CONTYPE,
+            group=2,
+        )
+    for marker in markers:
+        body = world.add_body(name=f"armreach_marker_{marker.name}", mocap=True)
+        body.add_geom(
+            type=mujoco.mjtGeom.mjGEOM_SPHERE,
+            size=[marker.radius, 0.0, 0.0],
+            rgba=list(marker.rgba),
+            contype=0,
+            conaffinity=0,
+            group=2,
+            mass=0.0,
+        )
+
+    model = spec.compile()
+    qpos = np.array([model.jnt_qposadr[model.joint(n).id] for n in robot.joint_names], dtype=np.intp)
+    qvel = np.array([model.jnt_dofadr[model.joint(n).id] for n in robot.joint_names], dtype=np.intp)
+    actuators = np.array([model.actuator(n).id for n in robot.joint_names], dtype=np.intp)
+
+    # Servo gains from the joint-space inertia at home: kv large against it, kp = kv * lambda.
+    data = mujoco.MjData(model)
+    data.qpos[qpos] = robot.home
+    mujoco.mj_forward(model, data)
+    diag = np.empty(len(qvel))
+    unit, column = np.zeros(model.nv), np.zeros(model.nv)
+    for i, dof in enumerate(qvel):  # M_ii through mj_mulM: the same call in mujoco 3 and 4
+        unit[:] = 0.0
+        unit[dof] = 1.0
+        mujoco.mj_mulM(model, data, column, unit)
+        diag[i] = column[dof]
+    kv = SERVO_DAMPING * diag / physics.timestep
+    kp = kv * SERVO_GAIN_SCALE * POSITION_GAIN / physics.timestep
+    for act, p, v in zip(actuators, kp, kv, strict=True):
+        model.actuator_gainprm[act, 0] = p
+        model.actuator_biasprm[act, 1] = -p
+        model.actuator_biasprm[act, 2] = -v
+
+    bodies = {model.body(i).name: i for i in range(model.nbody)}
+    mocap = {m.name: int(model.body_mocapid[bodies[f"armreach_marker_{m.name}"]]) for m in markers}
+    return _Compiled(model=model, qpos=qpos, qvel=qvel, actuators=actuators, bodies=bodies, mocap=mocap)
+
+
+def compiled_model(robot: RobotModel, physics: PhysicsConfig, markers: tuple[_Marker, ...] = ()) -> _Compiled:
+    """The compiled model for ``robot``, cached per (URDF file, mtime, physics, markers, gains)."""
+    try:
+        mtime = robot.urdf_path.stat().st_mtime_ns
+    except OSError:
+        mtime = -1
+    key = (
+        str(robot.urdf_path),
+        mtime,
+        hashlib.sha1(robot.parsed.resolved_xml).hexdigest(),
+        tuple(robot.home.tolist()),
+        robot.joint_names,
+        physics,
+        markers,
+        (POSITION_GAIN, SERVO_DAMPING, SERVO_GAIN_SCALE, ARMATURE, GRAVITY_COMPENSATION),
+    )
+    with _cache_lock:
+        hit = _cache.get(key)
+        if hit is not None:
+            _cache.move_to_end(key)
+            return hit
+    compiled = _build(robot, physics, markers)
+    with _cache_lock:
+        _cache[key] = compiled
+        while len(_cache) > MODEL_CACHE_SIZE:
+            _cache.popitem(last=False)
+    return compiled
+
+
+def clear_cache() -> None:
+    """Forget every compiled model (for tests and gain tuning)."""
+    with _cache_lock:
+        _cache.clear()
+
+
+class MuJoCoBackend(Backend):
+    """The optional MuJoCo backend."""
+
+    name = "mujoco"
+
+    def __init__(self, robot: RobotModel, physics: PhysicsConfig) -> None:
+        super().__init__(robot, physics)
+        self._markers: tuple[_Marker, ...] = ()
+        self._renderer: Any = None
+        self._renderer_size = (0, 0)
+        self._compiled_mocap_before: dict[str, int] = {}
+        self._closed = False
+        self._load(compiled_model(robot, physics))
+
+    def _load(self, compiled: _Compiled) -> None:
+        old = getattr(self, "data", None)
+        self._compiled = compiled
+        self.model = compiled.model
+        self.data = mujoco.MjData(self.model)
+        self._qpos, self._qvel, self._act = compiled.qpos, compiled.qvel, compiled.actuators
+        if old is None:
+            self.data.qpos[self._qpos] = self.robot.home
+            self.data.ctrl[self._act] = self.robot.home
+        else:  # a marker was added: carry the state over (markers add no degrees of freedom)
+            self.data.qpos[:] = old.qpos
+            self.data.qvel[:] = old.qvel
+            self.data.ctrl[:] = old.ctrl
+            self.data.time = old.time
+            for name, index in compiled.mocap.items():
+                previous = self._compiled_mocap_before.get(name)
+                if previous is not None:
+                    self.data.mocap_pos[index] = old.mocap_pos[previous]
+        mujoco.mj_forward(self.model, self.data)
+        if self._renderer is not None:
+            self._close_renderer()
+
+    def _live(self) -> None:
+        if self._closed:
+            raise ArmReachError("the MuJoCo backend is closed")
+
+    # -- control -----------------------------------------------------------------------
+    def reset_joints(self, q: npt.ArrayLike) -> None:
+        self._live()
+        values = np.asarray(q, dtype=np.float64)
+        data = self.data
+        data.qpos[self._qpos] = values
+        data.qvel[:] = 0.0
+        data.qacc_warmstart[:] = 0.0
+        data.ctrl[self._act] = values
+        mujoco.mj_forward(self.model, data)
+
+    def set_joint_targets(self, q: FloatArray) -> None:
+        self.data.ctrl[self._act] = q
+
+    def step(self) -> None:
+        mujoco.mj_step(self.model, self.data, nstep=self.physics.substeps)
+        # mj_step leaves xpos at the pose before its last integration: bring links up to qpos
+        mujoco.mj_kinematics(self.model, self.data)
+
+    # -- state -------------------------------------------------------------------------
+    def joint_state(self) -> tuple[FloatArray, FloatArray]:
+        return self.data.qpos[self._qpos].copy(), self.data.qvel[self._qvel].copy()
+
+    def link_position(self, link: str) -> FloatArray:
+        try:
+            index = self._compiled.bodies[link]
+        except KeyError:
+            raise ArmReachError(f"link {link!r} is not part of {self.robot.name!r}") from None
+        return self.data.xpos[index].copy()
+
+    # -- markers and rendering -----------------------------------------------------------
+    def add_marker(self, name: str, radius: float, rgba: tuple[float, float, float, float]) -> None:
+        self._live()
+        if any(m.name == name for m in self._markers):
+            raise ArmReachError(f"marker {name!r} already exists")
+        marker = _Marker(name, float(radius), (float(rgba[0]), float(rgba[1]), float(rgba[2]), float(rgba[3])))
+        self._compiled_mocap_before = self._compiled.mocap
+        self._markers = (*self._markers, marker)
+        self._load(compiled_model(self.robot, self.physics, self._markers))
+
+    def set_marker(self, name: str, position: FloatArray) -> None:
+        try:
+            index = self._compiled.mocap[name]
+        except KeyError:
+            raise ArmReachError(f"marker {name!r} does not exist; add it first") from None
+        self.data.mocap_pos[index] = position
+
+    def render(self, camera: Camera) -> npt.NDArray[np.uint8]:
+        self._live()
+        model = self.model
+        if self._renderer is None or self._renderer_size != (camera.width, camera.height):
+            self._close_renderer()
+            model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), camera.width)
+            model.vis.global_.offheight = max(int(model.vis.global_.offheight), camera.height)
+            try:
+                self._renderer = mujoco.Renderer(model, height=camera.height, width=camera.width)
+            except Exception as exc:
+                raise BackendUnavailableError(
+                    f"MuJoCo cannot render offscreen (MUJOCO_GL={os.environ.get('MUJOCO_GL', '')!r}): {exc}. "
+                    "Install EGL (`apt-get install libegl1`, with MUJOCO_GL=egl) or OSMesa "
+                    "(`apt-get install libosmesa6`, with MUJOCO_GL=osmesa and PYOPENGL_PLATFORM=osmesa)"
+                ) from exc
+            self._renderer_size = (camera.width, camera.height)
+            self._scene_option = mujoco.MjvOption()
+            has_visuals = bool(np.any(model.geom_group == 1))
+            self._scene_option.geomgroup[:] = [0 if has_visuals else 1, 1, 1, 0, 0, 0]
+        free = mujoco.MjvCamera()
+        free.type = mujoco.mjtCamera.mjCAMERA_FREE
+        free.lookat[:] = camera.target
+        free.distance = camera.distance
+        free.azimuth = camera.yaw + 90.0  # PyBullet's yaw 0 looks along +y, MuJoCo's azimuth 0 along +x
+        free.elevation = camera.pitch
+        model.vis.global_.fovy = camera.fov
+        mujoco.mj_kinematics(model, self.data)  # markers moved since the last step
+        mujoco.mj_camlight(model, self.data)
+        self._renderer.update_scene(self.data, camera=free, scene_option=self._scene_option)
+        return np.ascontiguousarray(self._renderer.render())
+
+    def _close_renderer(self) -> None:
+        renderer, self._renderer = self._renderer, None
+        if renderer is not None:
+            with contextlib.suppress(Exception):
+                renderer.close()
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self._close_renderer()
+
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):
+            self.close()
+
+
+__all__ = ["MuJoCoBackend", "clear_cache", "compiled_model"]
