@@ -12,7 +12,8 @@ Success:
     ``distance < success_threshold``; the episode then terminates.
 
 Reward:
-    ``r = -d**3 + success_bonus * [d < success_threshold]`` with ``d`` in metres.
+    ``r = -d**p + success_bonus * [d < success_threshold]`` with ``d`` in metres and
+    ``p = distance_exponent`` (3, the paper's, by default).
 """
 
 from __future__ import annotations
@@ -38,6 +39,8 @@ class ReachTask(Task):
     Args:
         success_threshold: success distance (m), default 0.05.
         success_bonus: reward added on success, default 10.
+        distance_exponent: ``p`` in the distance term ``-d^p``, default 3 (the paper's);
+            1 gives a steeper signal near the target for training.
         target_radius: radius of the target ball (m), default 0.5.
         target_center: centre of the ball (m, base frame); default from the robot's
             registration, else ``(0.5 R, 0, 0.5 R)`` with ``R`` the arm's reach.
@@ -54,6 +57,7 @@ class ReachTask(Task):
         *,
         success_threshold: float = 0.05,
         success_bonus: float = 10.0,
+        distance_exponent: float = 3.0,
         target_radius: float = 0.5,
         target_center: npt.ArrayLike | None = None,
         min_target_height: float = 0.05,
@@ -64,6 +68,9 @@ class ReachTask(Task):
             raise ConfigError(f"success_threshold={success_threshold!r} must be a positive distance (m)")
         if not np.isfinite(success_bonus):
             raise ConfigError(f"success_bonus={success_bonus!r} must be finite")
+        if not (np.isfinite(distance_exponent) and distance_exponent > 0):
+            raise ConfigError(f"distance_exponent={distance_exponent!r} must be positive")
+        self.distance_exponent = float(distance_exponent)
         self.success_threshold = float(success_threshold)
         self.success_bonus = float(success_bonus)
         self.goal_conditioned = bool(goal_conditioned)
@@ -153,7 +160,9 @@ class ReachTask(Task):
         self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any
     ) -> npt.NDArray[np.float64]:
         distance = self._distance(achieved_goal, desired_goal)
-        return np.asarray(-(distance**3) + self.success_bonus * (distance < self.success_threshold))
+        return np.asarray(
+            -(distance**self.distance_exponent) + self.success_bonus * (distance < self.success_threshold)
+        )
 
     def compute_terminated(
         self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any

@@ -6,10 +6,10 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from armreach_core.cli import plugins, rollout
+from armreach_core.cli import evaluate, experiment, plugins, rollout, train
 from armreach_core.errors import ArmReachError
 
-COMMANDS = (plugins, rollout)
+COMMANDS = (train, evaluate, experiment, rollout, plugins)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -23,6 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``armreach`` script; returns the exit status."""
     args = build_parser().parse_args(argv)
+    args.command_line = ["armreach", *(sys.argv[1:] if argv is None else argv)]
     try:
         status: int = args.run(args)
     except ArmReachError as exc:

@@ -1,0 +1,37 @@
+"""``armreach evaluate``: the paper's metrics for a run, on its own or another backend."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+
+def add_parser(sub: Any) -> None:
+    parser = sub.add_parser("evaluate", help="evaluate a run: success, steps to goal, reward, jerk")
+    parser.add_argument("run_dir", type=Path, metavar="RUN", help="run folder made by `armreach train`")
+    parser.add_argument("--episodes", type=int, default=100, help="evaluation episodes (default: 100)")
+    parser.add_argument("--backend", default=None, help="evaluate on this backend (default: the run's)")
+    parser.add_argument("--seed", type=int, default=10_000, help="seed of the first episode (default: 10000)")
+    parser.add_argument(
+        "--max-episode-steps", type=int, default=None, help="episode limit (default: the run's, 2048 as in the paper)"
+    )
+    parser.add_argument("--out", type=Path, default=None, help="output folder (default: RUN/eval-<backend>)")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from armreach_core.rl.evaluate import evaluate_run, format_summary, save_evaluation
+
+    evaluation = evaluate_run(
+        args.run_dir,
+        episodes=args.episodes,
+        backend=args.backend,
+        seed=args.seed,
+        max_episode_steps=args.max_episode_steps,
+    )
+    out = args.out or args.run_dir / f"eval-{evaluation.backend}"
+    summary = save_evaluation(evaluation, out)
+    print(format_summary(summary))
+    print(f"per-episode results: {out / 'episodes.csv'}")
+    return 0

@@ -1,0 +1,75 @@
+"""``armreach train``: train an agent with a preset into a run folder (or continue one)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from armreach_core.rl import runs
+from armreach_core.rl.presets import ALGOS
+
+
+def add_parser(sub: Any) -> None:
+    parser = sub.add_parser("train", help="train an agent (Stable-Baselines3) into a run folder")
+    parser.add_argument("--algo", choices=ALGOS, default="ddpg", help="algorithm (default: ddpg; ik trains nothing)")
+    parser.add_argument("--preset", default="paper", help="bundled preset (paper, fast) or a YAML file")
+    parser.add_argument("--task", default="reach", help="registered task (default: reach)")
+    parser.add_argument("--backend", default="pybullet", help="physics backend (default: pybullet)")
+    parser.add_argument("--her", action="store_true", help="hindsight experience replay (off-policy algorithms)")
+    parser.add_argument("--steps", type=int, default=None, help="total env steps (default: the preset's)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    parser.add_argument("--n-envs", type=int, default=None, help="parallel envs (default: the preset's, or 1)")
+    parser.add_argument("--urdf", default=None, help="URDF of the arm (default: the task's robot)")
+    parser.add_argument("--ee-link", default=None, help="end-effector link")
+    parser.add_argument("--device", default="auto", help="torch device (default: auto)")
+    parser.add_argument("--out", type=Path, default=None, help="run folder (default: runs/<algo>-<preset>-...)")
+    parser.add_argument("--resume", type=Path, default=None, metavar="RUN", help="continue the run in RUN")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from armreach_core.rl.train import resolve_config, train
+
+    if args.resume is not None:
+        run_dir: Path = args.resume
+        config = runs.read_config(run_dir)
+        if args.steps is not None:
+            config["timesteps"] = int(args.steps)
+        print(f"resuming {run_dir} towards {config['timesteps']} steps")
+        result = train(config, run_dir, resume=True, command=args.command_line)
+    else:
+        config = resolve_config(
+            algo=args.algo,
+            preset=args.preset,
+            task=args.task,
+            backend=args.backend,
+            steps=args.steps,
+            seed=args.seed,
+            n_envs=args.n_envs,
+            her=args.her,
+            urdf=args.urdf,
+            ee_link=args.ee_link,
+            device=args.device,
+        )
+        name = [config["algo"] + ("-her" if args.her else ""), config["preset"], config["backend"], f"s{args.seed}"]
+        run_dir = args.out or runs.default_run_dir("runs", name)
+        if config["algo"] == "ik":
+            runs.new_run_dir(run_dir)
+            runs.write_yaml(run_dir / runs.CONFIG, config)
+            runs.record_command(run_dir, args.command_line)
+            runs.write_json(run_dir / runs.ENVIRONMENT, runs.environment_record())
+            print(f"ik has nothing to train; evaluate it with `armreach evaluate {run_dir}`")
+            return 0
+        result = train(config, run_dir, command=args.command_line)
+    if result.interrupted:
+        print(
+            f"interrupted at {result.timesteps}/{result.total} steps; checkpoint saved. "
+            f"Continue with `armreach train --resume {run_dir}`",
+            file=sys.stderr,
+        )
+        return 130
+    print(f"trained {result.timesteps} steps in {result.seconds / 60:.1f} min; model: {run_dir / runs.MODEL}")
+    print(f"evaluate with `armreach evaluate {run_dir}`")
+    return 0

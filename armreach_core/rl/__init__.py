@@ -1,0 +1,1 @@
+"""Training, evaluation and experiments on top of Stable-Baselines3."""

@@ -1,0 +1,191 @@
+"""Evaluation: seeded episodes of the paper's task, per-episode records and summary metrics.
+
+Episode ``i`` is reset with ``seed + i``, so every algorithm and backend sees the same
+targets. Metrics follow the paper: success rate, steps to goal (mean ± std over
+successes), final reward (mean episode return), and jerk (rad/s³, third finite
+difference of joint angles at the control rate, over successful episodes).
+"""
+
+from __future__ import annotations
+
+import csv
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from armreach_core.env import ArmEnv
+from armreach_core.errors import ConfigError
+from armreach_core.rl import runs
+from armreach_core.rl.agents import Agent, IKAgent, SB3Agent, algo_class, env_kwargs
+from armreach_core.rl.metrics import MeanStd, jerk, mean_jerk, steps_to_goal
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One evaluation episode."""
+
+    index: int
+    seed: int
+    success: bool
+    steps: int
+    final_distance: float
+    episode_return: float
+    mean_jerk: float
+    joint_limit_violations: int
+
+
+@dataclass
+class Evaluation:
+    """All episodes of one evaluation, plus the jerk trace used for the jerk-over-time figure."""
+
+    backend: str
+    episodes: list[Episode]
+    control_dt: float
+    jerk_trace: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    seconds: float = 0.0
+
+    def summary(self) -> dict[str, Any]:
+        successes = [e.success for e in self.episodes]
+        stg = steps_to_goal([e.steps for e in self.episodes], successes)
+        returns = MeanStd.of([e.episode_return for e in self.episodes])
+        jerks = MeanStd.of([e.mean_jerk for e in self.episodes if e.success])
+        return {
+            "backend": self.backend,
+            "episodes": len(self.episodes),
+            "success_rate": float(np.mean(successes)) if successes else float("nan"),
+            "steps_to_goal_mean": stg.mean,
+            "steps_to_goal_std": stg.std,
+            "final_reward_mean": returns.mean,
+            "final_reward_std": returns.std,
+            "jerk_mean": jerks.mean,
+            "jerk_std": jerks.std,
+            "final_distance_mean": float(np.mean([e.final_distance for e in self.episodes])),
+            "control_dt": self.control_dt,
+            "seconds": self.seconds,
+        }
+
+
+def run_episodes(
+    make_env: Callable[[], ArmEnv],
+    agent: Agent,
+    episodes: int,
+    seed: int = 10_000,
+    *,
+    on_frame: Callable[[int, ArmEnv], None] | None = None,
+) -> Evaluation:
+    """Run ``episodes`` seeded episodes of ``agent`` and record them."""
+    if episodes < 1:
+        raise ConfigError(f"episodes must be >= 1, got {episodes}")
+    env = make_env()
+    records: list[Episode] = []
+    traces: list[npt.NDArray[np.float64]] = []
+    t0 = time.perf_counter()
+    try:
+        dt = env.physics.control_dt
+        for i in range(episodes):
+            obs, info = env.reset(seed=seed + i)
+            qs = [env.backend.joint_state()[0].copy()]
+            total, violations, steps = 0.0, 0, 0
+            if on_frame is not None:
+                on_frame(i, env)
+            while True:
+                obs, reward, terminated, truncated, info = env.step(agent.act(obs, env))
+                qs.append(env.backend.joint_state()[0].copy())
+                total += float(reward)
+                violations += int(info.get("joint_limit_violation", False))
+                steps += 1
+                if on_frame is not None:
+                    on_frame(i, env)
+                if terminated or truncated:
+                    break
+            q = np.asarray(qs)
+            success = bool(info["is_success"])
+            if success:
+                traces.append(jerk(q, dt))
+            records.append(
+                Episode(i, seed + i, success, steps, float(info["distance"]), total, mean_jerk(q, dt), violations)
+            )
+    finally:
+        env.close()
+    return Evaluation(env.backend_name, records, dt, _average_trace(traces), time.perf_counter() - t0)
+
+
+def _average_trace(traces: list[npt.NDArray[np.float64]]) -> npt.NDArray[np.float64]:
+    """Mean jerk at each time step over the episodes still running at that step."""
+    if not traces:
+        return np.zeros(0)
+    length = max(t.size for t in traces)
+    total = np.zeros(length)
+    count = np.zeros(length)
+    for t in traces:
+        total[: t.size] += t
+        count[: t.size] += 1
+    return np.asarray(total / np.maximum(count, 1), dtype=np.float64)
+
+
+def load_agent(run_dir: Path, config: dict[str, Any]) -> Agent:
+    """The run's controller: its trained model, or the IK reference."""
+    if config["algo"] == "ik":
+        return IKAgent(float(config["settings"].get("damping", 0.05)))
+    for name in (runs.MODEL, runs.CHECKPOINT):
+        path = run_dir / name
+        if path.is_file():
+            # HER models need an env with the goal spaces to load; a policy needs nothing else.
+            env = ArmEnv(**env_kwargs(config)) if "her" in config["settings"] else None
+            try:
+                return SB3Agent(algo_class(config["algo"]).load(path, env=env, device="cpu"))
+            except Exception as exc:
+                raise ConfigError(f"cannot load {path}: {exc}; the file is damaged or not an SB3 model") from exc
+            finally:
+                if env is not None:
+                    env.close()
+    raise ConfigError(f"{run_dir} has no {runs.MODEL} or {runs.CHECKPOINT}; train it first")
+
+
+def evaluate_run(
+    run_dir: Path,
+    *,
+    episodes: int = 100,
+    backend: str | None = None,
+    seed: int = 10_000,
+    max_episode_steps: int | None = None,
+) -> Evaluation:
+    """Evaluate a run folder on the paper's task (2048-step limit), optionally on another backend."""
+    config = runs.read_config(run_dir)
+    if max_episode_steps is not None:
+        config["eval_max_episode_steps"] = max_episode_steps
+    agent = load_agent(run_dir, config)
+    kwargs = env_kwargs(config, backend=backend, evaluation=True)
+    return run_episodes(lambda: ArmEnv(**kwargs), agent, episodes, seed)
+
+
+def save_evaluation(evaluation: Evaluation, out: Path) -> dict[str, Any]:
+    """Write ``summary.json``, ``episodes.csv`` and ``jerk_trace.csv`` into ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    summary = evaluation.summary()
+    runs.write_json(out / "summary.json", summary)
+    with runs.atomic_path(out / "episodes.csv") as tmp, open(tmp, "w", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(Episode.__dataclass_fields__))
+        writer.writeheader()
+        for episode in evaluation.episodes:
+            writer.writerow(asdict(episode))
+    with runs.atomic_path(out / "jerk_trace.csv") as tmp:
+        times = np.arange(evaluation.jerk_trace.size) * evaluation.control_dt
+        np.savetxt(tmp, np.column_stack([times, evaluation.jerk_trace]), delimiter=",", header="time_s,jerk_rad_s3")
+    return summary
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    sr = summary["success_rate"]
+    stg = MeanStd(summary["steps_to_goal_mean"], summary["steps_to_goal_std"], 1 if sr > 0 else 0)
+    jk = MeanStd(summary["jerk_mean"], summary["jerk_std"], 1 if sr > 0 else 0)
+    return (
+        f"{summary['backend']}: success {100 * sr:.0f}% of {summary['episodes']} episodes; "
+        f"steps to goal {stg.fmt(1)}; final reward {summary['final_reward_mean']:.2f}; "
+        f"jerk {jk.fmt(2)} rad/s³; {summary['seconds']:.1f} s"
+    )

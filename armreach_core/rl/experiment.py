@@ -1,0 +1,155 @@
+"""``armreach experiment paper``: train and evaluate the paper's agents over seeds and report.
+
+Each (agent, seed) is an ordinary run folder under the experiment folder, so a finished
+run is reused when the experiment is started again (an interrupted one is resumed),
+and every number in ``report.md`` can be traced to a run.
+"""
+
+from __future__ import annotations
+
+import csv
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+import numpy.typing as npt
+
+from armreach_core.errors import ConfigError
+from armreach_core.rl import runs
+from armreach_core.rl.evaluate import Evaluation, evaluate_run, save_evaluation
+from armreach_core.rl.metrics import MeanStd, convergence_episode, moving_average
+from armreach_core.rl.train import resolve_config, train
+
+#: The paper's numbers (Tables 2-4): PPO and DDPG, 614,400 steps, 100 evaluation episodes.
+PAPER = {
+    "PPO": {"convergence": (177, 25), "final_reward": (3.0, 0.4), "success": 34, "steps": (1500, 200), "jerk": 0.11},
+    "DDPG": {"convergence": (294, 18), "final_reward": (4.95, 0.3), "success": 69, "steps": (1450, 180), "jerk": 0.02},
+}
+REWARD_WINDOW = 10
+
+
+@dataclass(frozen=True)
+class Arm:
+    """One agent of the experiment."""
+
+    label: str
+    algo: str
+    preset: str
+    her: bool = False
+    steps: int | None = None
+
+
+@dataclass
+class ArmResult:
+    arm: Arm
+    seeds: list[int] = field(default_factory=list)
+    episode_rewards: list[npt.NDArray[np.float64]] = field(default_factory=list)
+    summaries: list[dict[str, Any]] = field(default_factory=list)
+    jerk_traces: list[npt.NDArray[np.float64]] = field(default_factory=list)
+    run_dirs: list[Path] = field(default_factory=list)
+    train_seconds: list[float] = field(default_factory=list)
+    timesteps: list[int] = field(default_factory=list)
+
+    def convergence(self) -> MeanStd:
+        values = [convergence_episode(r, REWARD_WINDOW) for r in self.episode_rewards]
+        return MeanStd.of([np.nan if v is None else v for v in values])
+
+    def converged_runs(self) -> int:
+        return sum(convergence_episode(r, REWARD_WINDOW) is not None for r in self.episode_rewards)
+
+    def final_reward(self) -> MeanStd:
+        return MeanStd.of([moving_average(r, REWARD_WINDOW)[-1] for r in self.episode_rewards if r.size])
+
+    def stat(self, key: str, scale: float = 1.0) -> MeanStd:
+        return MeanStd.of([s[key] * scale for s in self.summaries])
+
+
+def paper_arms(steps: int | None, fast: bool) -> list[Arm]:
+    arms = [Arm("PPO", "ppo", "paper", steps=steps), Arm("DDPG", "ddpg", "paper", steps=steps)]
+    if fast:
+        arms.append(Arm("SAC+HER (fast preset)", "sac", "fast", her=True))
+    return arms
+
+
+def episode_rewards(run_dir: Path) -> npt.NDArray[np.float64]:
+    """Training episode returns from the run's monitor logs (one per env), in order.
+
+    Rows keep their order within each env's log (a resumed run appends to it); logs of
+    parallel envs are interleaved by their position in each log.
+    """
+    rows: list[tuple[float, float]] = []
+    for path in sorted((run_dir / "monitor").glob("*.monitor.csv")):
+        lines = [line for line in path.read_text(encoding="utf-8").splitlines() if not line.startswith("#")]
+        records = list(csv.DictReader(lines))
+        rows += [((j + 0.5) / len(records), float(record["r"])) for j, record in enumerate(records)]
+    rows.sort(key=lambda row: row[0])
+    return np.asarray([r for _, r in rows], dtype=np.float64)
+
+
+def _log(stream: TextIO | None, text: str) -> None:
+    if stream is not None:
+        print(text, file=stream, flush=True)
+
+
+def run_experiment(
+    out: Path,
+    arms: list[Arm],
+    *,
+    seeds: int = 1,
+    episodes: int = 100,
+    backend: str = "pybullet",
+    stream: TextIO | None = sys.stderr,
+    eval_max_episode_steps: int = 2048,
+    command: list[str] | None = None,
+) -> tuple[list[ArmResult], Evaluation]:
+    """Train and evaluate every arm for every seed (reusing finished runs), then the IK reference."""
+    if seeds < 1:
+        raise ConfigError(f"--seeds must be >= 1, got {seeds}")
+    out.mkdir(parents=True, exist_ok=True)
+    results = []
+    for arm in arms:
+        result = ArmResult(arm)
+        for seed in range(seeds):
+            config = resolve_config(
+                algo=arm.algo,
+                preset=arm.preset,
+                backend=backend,
+                steps=arm.steps,
+                seed=seed,
+                her=arm.her,
+                eval_max_episode_steps=eval_max_episode_steps,
+            )
+            run_dir = out / f"{arm.algo}{'-her' if arm.her else ''}-{config['preset']}-s{seed}"
+            t0 = time.perf_counter()
+            if not (run_dir / runs.MODEL).is_file():
+                resume = (run_dir / runs.CHECKPOINT).is_file()
+                _log(stream, f"{'resuming' if resume else 'training'} {arm.label}, seed {seed}: {run_dir}")
+                trained = train(config, run_dir, resume=resume, stream=stream, command=command)
+                if trained.interrupted:
+                    raise KeyboardInterrupt
+            else:
+                _log(stream, f"reusing {run_dir}")
+            result.train_seconds.append(time.perf_counter() - t0)
+            evaluation = evaluate_run(run_dir, episodes=episodes, backend=backend)
+            summary = save_evaluation(evaluation, run_dir / f"eval-{backend}")
+            _log(stream, f"  success {100 * summary['success_rate']:.0f}% over {episodes} episodes")
+            result.seeds.append(seed)
+            result.run_dirs.append(run_dir)
+            result.episode_rewards.append(episode_rewards(run_dir))
+            result.summaries.append(summary)
+            result.jerk_traces.append(evaluation.jerk_trace)
+            result.timesteps.append(int(runs.read_config(run_dir)["timesteps"]))
+        results.append(result)
+    ik_dir = out / "ik"
+    if not (ik_dir / runs.CONFIG).is_file():
+        runs.new_run_dir(ik_dir)
+        ik_config = resolve_config(
+            algo="ik", preset="paper", backend=backend, eval_max_episode_steps=eval_max_episode_steps
+        )
+        runs.write_yaml(ik_dir / runs.CONFIG, ik_config)
+    ik = evaluate_run(ik_dir, episodes=episodes, backend=backend)
+    save_evaluation(ik, ik_dir / f"eval-{backend}")
+    return results, ik

@@ -1,0 +1,216 @@
+"""YAML training presets: loaded with ``yaml.safe_load``, validated key by key, never evaluated.
+
+A preset file maps task name → algorithm name → settings::
+
+    description: what the preset is for
+    reach:
+      ppo:
+        timesteps: 614400
+        env: {max_episode_steps: 2048}
+        policy: {net_arch: [128, 128], activation: relu}
+        learning_rate: 3.0e-4
+        ...
+
+Bundled presets live in ``armreach_core/presets/<name>.yaml``; a path to any other
+file works the same way. Unknown keys, wrong types and out-of-range values raise
+:class:`~armreach_core.errors.ConfigError` naming the key and what is allowed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from armreach_core.errors import ConfigError
+
+ALGOS = ("ppo", "ddpg", "td3", "sac", "ik")
+RL_ALGOS = ALGOS[:4]
+OFF_POLICY = ("ddpg", "td3", "sac")
+
+Check = Callable[[str, Any], Any]
+
+
+def _num(kind: type, lo: float | None = None, hi: float | None = None, lo_open: bool = False) -> Check:
+    def check(key: str, value: Any) -> Any:
+        ok_types: tuple[type, ...] = (int,) if kind is int else (int, float)
+        if isinstance(value, bool) or not isinstance(value, ok_types):
+            hint = " (write floats with a decimal point, e.g. 3.0e-4: YAML reads 3e-4 as a string)"
+            raise ConfigError(f"{key}: expected {kind.__name__}, got {value!r}{hint if isinstance(value, str) else ''}")
+        number = kind(value)
+        if not math.isfinite(number):
+            raise ConfigError(f"{key}: must be finite, got {value!r}")
+        if lo is not None and (number < lo or (lo_open and number == lo)):
+            raise ConfigError(f"{key}: must be {'>' if lo_open else '>='} {lo}, got {value!r}")
+        if hi is not None and number > hi:
+            raise ConfigError(f"{key}: must be <= {hi}, got {value!r}")
+        return number
+
+    return check
+
+
+def _choice(*options: Any) -> Check:
+    def check(key: str, value: Any) -> Any:
+        if value not in options:
+            raise ConfigError(f"{key}: must be one of {list(options)}, got {value!r}")
+        return value
+
+    return check
+
+
+def _bool(key: str, value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise ConfigError(f"{key}: expected true or false, got {value!r}")
+    return value
+
+
+def _int_list(key: str, value: Any) -> list[int]:
+    if not isinstance(value, list) or not value or not all(isinstance(v, int) and v > 0 for v in value):
+        raise ConfigError(f"{key}: expected a non-empty list of positive layer sizes, got {value!r}")
+    return [int(v) for v in value]
+
+
+def _section(schema: Mapping[str, Any]) -> Check:
+    def check(key: str, value: Any) -> Any:
+        return _validate(value, schema, key)
+
+    return check
+
+
+ENV_SCHEMA: dict[str, Check] = {
+    "max_episode_steps": _num(int, 1),
+    "max_joint_step": _num(float, 0.0, 1.0, lo_open=True),
+    "joint_limit_mode": _choice("clip", "terminate"),
+    "success_threshold": _num(float, 0.0, lo_open=True),
+    "distance_exponent": _num(float, 0.0, lo_open=True),
+    "substeps": _num(int, 1),
+}
+POLICY_SCHEMA: dict[str, Check] = {"net_arch": _int_list, "activation": _choice("relu", "tanh")}
+NOISE_SCHEMA: dict[str, Check] = {
+    "type": _choice("normal", "ornstein-uhlenbeck", "none"),
+    "sigma": _num(float, 0.0),
+}
+HER_SCHEMA: dict[str, Check] = {
+    "n_sampled_goal": _num(int, 1),
+    "goal_selection_strategy": _choice("future", "final", "episode"),
+}
+COMMON: dict[str, Check] = {
+    "timesteps": _num(int, 1),
+    "n_envs": _num(int, 1, 64),
+    "torch_threads": _num(int, 0, 64),
+    "env": _section(ENV_SCHEMA),
+    "policy": _section(POLICY_SCHEMA),
+    "learning_rate": _num(float, 0.0, lo_open=True),
+    "gamma": _num(float, 0.0, 1.0),
+    "batch_size": _num(int, 1),
+    "checkpoint_every": _num(int, 1),
+}
+ALGO_SCHEMAS: dict[str, dict[str, Check]] = {
+    "ppo": {
+        **COMMON,
+        "n_steps": _num(int, 2),
+        "n_epochs": _num(int, 1),
+        "clip_range": _num(float, 0.0, lo_open=True),
+        "gae_lambda": _num(float, 0.0, 1.0),
+        "ent_coef": _num(float, 0.0),
+    },
+    "ik": {"env": _section(ENV_SCHEMA), "damping": _num(float, 0.0, lo_open=True), "timesteps": _num(int, 0)},
+}
+for _name in OFF_POLICY:
+    ALGO_SCHEMAS[_name] = {
+        **COMMON,
+        "tau": _num(float, 0.0, 1.0, lo_open=True),
+        "buffer_size": _num(int, 1),
+        "learning_starts": _num(int, 0),
+        "train_freq": _num(int, 1),
+        "gradient_steps": _num(int, 1),
+        "noise": _section(NOISE_SCHEMA),
+        "her": _section(HER_SCHEMA),
+    }
+
+
+def _validate(data: Any, schema: Mapping[str, Check], where: str) -> dict[str, Any]:
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where}: expected a mapping, got {type(data).__name__}")
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        path = f"{where}.{key}"
+        if key not in schema:
+            raise ConfigError(f"{path}: unknown key; allowed here: {', '.join(sorted(schema))}")
+        out[key] = schema[key](path, value)
+    return out
+
+
+@dataclass(frozen=True)
+class Preset:
+    """A validated preset: ``settings[task][algo]`` is a plain dict of checked values."""
+
+    name: str
+    description: str
+    settings: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
+    source: str = ""
+
+    def get(self, task: str, algo: str) -> dict[str, Any]:
+        """The settings for (task, algo); ConfigError listing what the preset has otherwise."""
+        if task not in self.settings:
+            have = sorted(self.settings)
+            raise ConfigError(f"preset {self.name!r} has no settings for task {task!r} (it has: {have})")
+        by_algo = self.settings[task]
+        if algo not in by_algo:
+            raise ConfigError(
+                f"preset {self.name!r} has no settings for {algo!r} on task {task!r} (it has: {sorted(by_algo)})"
+            )
+        return dict(by_algo[algo])
+
+    def algos(self, task: str) -> list[str]:
+        return sorted(self.settings.get(task, {}))
+
+
+def bundled_presets() -> list[str]:
+    """Names of the presets shipped with armreach."""
+    folder = resources.files("armreach_core") / "presets"
+    return sorted(p.name.removesuffix(".yaml") for p in folder.iterdir() if p.name.endswith(".yaml"))
+
+
+def parse_preset(text: str, name: str, source: str = "") -> Preset:
+    """Validate preset YAML text."""
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"preset {name!r} is not valid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"preset {name!r}: expected a mapping of task -> algorithm -> settings")
+    description = data.pop("description", "")
+    if not isinstance(description, str):
+        raise ConfigError(f"preset {name!r}: description must be a string")
+    settings: dict[str, dict[str, dict[str, Any]]] = {}
+    for task, by_algo in data.items():
+        if not isinstance(task, str) or not isinstance(by_algo, dict):
+            raise ConfigError(f"preset {name!r}: {task!r} must map algorithm names to settings")
+        settings[task] = {}
+        for algo, values in by_algo.items():
+            if algo not in ALGO_SCHEMAS:
+                raise ConfigError(f"preset {name!r}: {task}.{algo}: unknown algorithm; use one of {list(ALGOS)}")
+            settings[task][algo] = _validate(values, ALGO_SCHEMAS[algo], f"{task}.{algo}")
+    return Preset(name=name, description=description, settings=settings, source=source)
+
+
+def load_preset(name_or_path: str | Path) -> Preset:
+    """A bundled preset by name (``paper``, ``fast``) or a YAML file by path."""
+    text_name = str(name_or_path)
+    if text_name in bundled_presets():
+        resource = resources.files("armreach_core") / "presets" / f"{text_name}.yaml"
+        return parse_preset(resource.read_text(encoding="utf-8"), text_name, f"bundled:{text_name}")
+    path = Path(name_or_path).expanduser()
+    if not path.is_file():
+        raise ConfigError(
+            f"preset {text_name!r} is neither a bundled preset ({', '.join(bundled_presets())}) nor a YAML file"
+        )
+    return parse_preset(path.read_text(encoding="utf-8"), path.stem, str(path.resolve()))

@@ -1,0 +1,160 @@
+"""One folder per run: resolved config, command, plugins and versions, model, logs.
+
+Layout of ``runs/<name>/``::
+
+    config.yaml        the resolved settings (what `--resume` and `evaluate` read back)
+    command.txt        the command line that created the run (and each resume)
+    environment.json   Python, package and engine versions, and the loaded plugins
+    monitor.csv        one row per training episode (reward, length, time, success)
+    tb/                TensorBoard logs
+    checkpoint.zip     the latest checkpoint (+ checkpoint_replay.pkl for off-policy)
+    model.zip          the final model, written when training completes
+    eval-<backend>/    what `armreach evaluate` writes
+
+Every file is written to a temporary name in the same folder and renamed into place,
+so a run killed at any moment leaves the previous version of each file readable.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import json
+import os
+import platform
+import shlex
+import tempfile
+from collections.abc import Callable, Iterator, Sequence
+from importlib import metadata
+from pathlib import Path
+from typing import IO, Any
+
+import yaml
+
+from armreach_core.errors import ConfigError
+from armreach_core.plugins import get_host
+
+CONFIG = "config.yaml"
+COMMAND = "command.txt"
+ENVIRONMENT = "environment.json"
+MONITOR = "monitor.csv"
+MODEL = "model.zip"
+CHECKPOINT = "checkpoint.zip"
+REPLAY = "checkpoint_replay.pkl"
+TRUST_NOTE = (
+    "model and checkpoint files are pickles: loading one runs code from it; load only runs you or someone "
+    "you trust produced"
+)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a temporary path next to ``path``; on success it replaces ``path`` atomically."""
+    final = Path(path)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        with open(tmp_path, "rb") as handle:
+            os.fsync(handle.fileno())
+        os.replace(tmp_path, final)
+    finally:
+        tmp_path.unlink(missing_ok=True)
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
+    """Write ``text`` to ``path`` atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def atomic_save(path: str | os.PathLike[str], save: Callable[[Path], None]) -> None:
+    """Call ``save(tmp)`` then move ``tmp`` onto ``path`` atomically (for library savers)."""
+    final = Path(path)
+    with atomic_path(final) as tmp:
+        # Savers such as SB3's append ".zip" when it is missing; keep the suffix.
+        target = tmp.with_suffix(final.suffix)
+        try:
+            save(target)
+            os.replace(target, tmp)
+        finally:
+            target.unlink(missing_ok=True)
+
+
+def write_yaml(path: str | os.PathLike[str], data: dict[str, Any]) -> None:
+    atomic_write_text(path, yaml.safe_dump(data, sort_keys=False))
+
+
+def read_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
+    """The resolved config of a run, with a clear error when the folder is not a run."""
+    path = Path(run_dir) / CONFIG
+    if not path.is_file():
+        raise ConfigError(f"{run_dir} is not a run folder: {CONFIG} is missing (create one with `armreach train`)")
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path} is not valid YAML: {exc}") from None
+    if not isinstance(data, dict) or "algo" not in data:
+        raise ConfigError(f"{path} is not an armreach run config")
+    return data
+
+
+def versions() -> dict[str, str]:
+    """Versions of the packages a result depends on."""
+    out = {"python": platform.python_version(), "platform": platform.platform()}
+    for dist in ("armreach", "armreach-pybullet", "armreach-mujoco", "stable-baselines3", "torch", "gymnasium",
+                 "numpy", "pybullet", "mujoco"):  # fmt: skip
+        with contextlib.suppress(metadata.PackageNotFoundError):
+            out[dist] = metadata.version(dist)
+    return out
+
+
+def environment_record() -> dict[str, Any]:
+    host = get_host()
+    return {
+        "versions": versions(),
+        "plugins": [
+            {"name": p.name, "distribution": p.distribution, "version": p.version, "registered": p.registered}
+            for p in host.plugins()
+        ],
+        "plugin_failures": [str(f) for f in host.failures],
+    }
+
+
+def record_command(run_dir: Path, command: Sequence[str]) -> None:
+    """Append the command line (with a timestamp) to ``command.txt``."""
+    stamp = _dt.datetime.now().astimezone().isoformat(timespec="seconds")
+    path = run_dir / COMMAND
+    previous = path.read_text(encoding="utf-8") if path.is_file() else ""
+    atomic_write_text(path, f"{previous}# {stamp}\n{shlex.join(command)}\n")
+
+
+def default_run_dir(root: str | os.PathLike[str], parts: Sequence[str]) -> Path:
+    """``root/<parts joined by '-'>-<timestamp>``, unique."""
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    base = Path(root) / "-".join([*parts, stamp])
+    path, n = base, 1
+    while path.exists():
+        n += 1
+        path = base.with_name(f"{base.name}-{n}")
+    return path
+
+
+def new_run_dir(path: Path) -> Path:
+    """Create ``path``; refuse to reuse a folder that already holds a run."""
+    if (path / CONFIG).exists():
+        raise ConfigError(
+            f"{path} already holds a run; continue it with `armreach train --resume {path}` or choose another --out"
+        )
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def write_json(path: str | os.PathLike[str], data: Any) -> None:
+    atomic_write_text(path, json.dumps(data, indent=2, default=str) + "\n")
+
+
+def open_text(path: Path) -> IO[str]:
+    return open(path, encoding="utf-8")

@@ -1,0 +1,117 @@
+"""Presets load, validate and say exactly what is wrong; the paper preset is the paper's."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from armreach_core.errors import ConfigError
+from armreach_core.rl.presets import bundled_presets, load_preset, parse_preset
+from armreach_core.rl.train import resolve_config
+
+
+def test_bundled_presets_load_and_validate() -> None:
+    names = bundled_presets()
+    assert {"paper", "fast"} <= set(names)
+    for name in names:
+        preset = load_preset(name)
+        assert preset.description
+        assert preset.algos("reach")
+
+
+def test_paper_preset_is_the_papers_settings() -> None:
+    paper = load_preset("paper")
+    ppo = paper.get("reach", "ppo")
+    assert ppo["policy"] == {"net_arch": [128, 128], "activation": "relu"}
+    assert (ppo["learning_rate"], ppo["gamma"], ppo["clip_range"], ppo["batch_size"], ppo["n_steps"]) == (
+        3e-4,
+        0.99,
+        0.2,
+        300,
+        2048,
+    )
+    ddpg = paper.get("reach", "ddpg")
+    assert ddpg["policy"]["net_arch"] == [256, 256]
+    assert (ddpg["learning_rate"], ddpg["gamma"], ddpg["tau"], ddpg["batch_size"]) == (1e-3, 0.99, 0.005, 300)
+    assert ddpg["noise"] == {"type": "ornstein-uhlenbeck", "sigma": 0.1}
+    for settings in (ppo, ddpg):
+        assert settings["timesteps"] == 614_400 == 300 * 2048
+        assert settings["env"] == {"max_episode_steps": 2048, "joint_limit_mode": "terminate"}
+
+
+def test_paper_models_are_built_with_those_settings(tmp_path: Path) -> None:
+    import torch
+
+    from armreach_core.rl.agents import build_model, make_vec_env
+
+    for algo in ("ppo", "ddpg"):
+        config = resolve_config(algo=algo, preset="paper")
+        env = make_vec_env(config, tmp_path / algo, 0, 1, append=False)
+        model = build_model(algo, config["settings"], env, 0, None, "cpu")
+        assert model.gamma == 0.99
+        assert model.batch_size == 300
+        if algo == "ppo":
+            assert model.n_steps == 2048
+            assert model.learning_rate == 3e-4
+            layers = [m for m in model.policy.mlp_extractor.policy_net if isinstance(m, torch.nn.Linear)]
+            assert [m.out_features for m in layers] == [128, 128]
+            assert any(isinstance(m, torch.nn.ReLU) for m in model.policy.mlp_extractor.policy_net)
+        else:
+            assert model.tau == 0.005
+            assert model.learning_rate == 1e-3
+            assert type(model.action_noise).__name__ == "OrnsteinUhlenbeckActionNoise"
+            assert model.action_noise._sigma.tolist() == [0.1] * 6
+            layers = [m for m in model.actor.mu if isinstance(m, torch.nn.Linear)]
+            assert [m.out_features for m in layers][:2] == [256, 256]
+        env.close()
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        (
+            "reach:\n  ppo:\n    learning_rat: 1.0e-3\n",
+            r"ppo\.learning_rat: unknown key; allowed here: .*learning_rate",
+        ),
+        ("reach:\n  ppo:\n    learning_rate: 3e-4\n", r"expected float.*decimal point"),
+        ("reach:\n  ppo:\n    learning_rate: -1.0\n", r"learning_rate: must be > 0"),
+        ("reach:\n  ppo:\n    gamma: 1.5\n", r"gamma: must be <= 1"),
+        ("reach:\n  ppo:\n    batch_size: 3.5\n", r"batch_size: expected int"),
+        ("reach:\n  ppo:\n    env: {joint_limit_mode: wrap}\n", r"joint_limit_mode: must be one of"),
+        ("reach:\n  ppo:\n    policy: {net_arch: []}\n", r"net_arch: expected a non-empty list"),
+        ("reach:\n  a2c: {}\n", r"unknown algorithm"),
+        ("reach:\n  ddpg:\n    noise: {type: pink}\n", r"noise\.type: must be one of"),
+        ("reach: [1, 2]\n", r"must map algorithm names"),
+        ("- just a list\n", r"expected a mapping"),
+        ("reach: {ppo: {timesteps: .nan}}\n", r"expected int"),
+        ("reach: {ppo: {learning_rate: .inf}}\n", r"must be finite"),
+        ("reach: !!python/object/apply:os.system ['echo hi']\n", r"not valid YAML"),
+        ("reach: {ppo: [\n", r"not valid YAML"),
+    ],
+)
+def test_bad_presets_name_the_problem(text: str, match: str) -> None:
+    with pytest.raises(ConfigError, match=match):
+        parse_preset(text, "bad")
+
+
+def test_missing_algo_task_or_file_lists_what_exists(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"no settings for 'a2c'|unknown algorithm"):
+        load_preset("paper").get("reach", "a2c")
+    with pytest.raises(ConfigError, match=r"no settings for task 'grasp'.*'reach'"):
+        load_preset("paper").get("grasp", "ppo")
+    with pytest.raises(ConfigError, match=r"neither a bundled preset \(.*paper.*\) nor a YAML file"):
+        load_preset(tmp_path / "missing.yaml")
+    with pytest.raises(ConfigError, match="--her needs an off-policy algorithm"):
+        resolve_config(algo="ppo", preset="paper", her=True)
+
+
+def test_a_preset_file_works_like_a_bundled_one(tmp_path: Path) -> None:
+    path = tmp_path / "mine.yaml"
+    path.write_text("description: mine\nreach:\n  sac:\n    timesteps: 123\n    gamma: 0.9\n")
+    config = resolve_config(algo="sac", preset=str(path), seed=4, her=True)
+    assert config["preset"] == "mine"
+    assert config["timesteps"] == 123
+    assert config["settings"]["gamma"] == 0.9
+    assert config["settings"]["her"]["goal_selection_strategy"] == "future"
+    assert config["seed"] == 4

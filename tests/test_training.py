@@ -1,0 +1,175 @@
+"""Train → evaluate → report on a few hundred steps, interruption and resume, bad run folders."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from armreach_core.cli import main
+from armreach_core.errors import ConfigError
+from armreach_core.rl import runs
+from armreach_core.rl.train import train
+
+TINY = """
+description: a few hundred steps, for tests
+reach:
+  ppo:
+    timesteps: 256
+    env: {max_episode_steps: 64}
+    policy: {net_arch: [16, 16]}
+    n_steps: 64
+    batch_size: 32
+    n_epochs: 1
+  ddpg: &off
+    timesteps: 300
+    env: {max_episode_steps: 64}
+    policy: {net_arch: [16, 16]}
+    learning_starts: 64
+    batch_size: 32
+    checkpoint_every: 100
+    noise: {type: ornstein-uhlenbeck, sigma: 0.1}
+  td3: *off
+  sac:
+    timesteps: 300
+    env: {max_episode_steps: 64}
+    policy: {net_arch: [16, 16]}
+    learning_starts: 64
+    batch_size: 32
+"""
+
+
+@pytest.fixture
+def tiny(tmp_path: Path) -> str:
+    path = tmp_path / "tiny.yaml"
+    path.write_text(TINY)
+    return str(path)
+
+
+def _monitor_rows(run_dir: Path) -> list[list[str]]:
+    rows = []
+    for path in sorted((run_dir / "monitor").glob("*.monitor.csv")):
+        rows += list(csv.reader(path.read_text().splitlines()[2:]))
+    return rows
+
+
+@pytest.mark.parametrize(("algo", "extra"), [("ppo", []), ("ddpg", []), ("td3", []), ("sac", []), ("sac", ["--her"])])
+def test_train_then_evaluate(tmp_path: Path, tiny: str, algo: str, extra: list[str]) -> None:
+    run_dir = tmp_path / "run"
+    assert main(["train", "--algo", algo, "--preset", tiny, "--seed", "3", "--out", str(run_dir), *extra]) == 0
+    config = yaml.safe_load((run_dir / "config.yaml").read_text())
+    assert (config["algo"], config["seed"], config["preset"]) == (algo, 3, "tiny")
+    assert config["settings"]["policy"]["net_arch"] == [16, 16]
+    assert ("her" in config["settings"]) == ("--her" in extra)
+    assert (
+        "armreach train --algo" in (run_dir / "command.txt").read_text()
+        or "train" in (run_dir / "command.txt").read_text()
+    )
+    environment = json.loads((run_dir / "environment.json").read_text())
+    assert "stable-baselines3" in environment["versions"]
+    assert any(p["name"] == "pybullet" for p in environment["plugins"])
+    assert (run_dir / "model.zip").stat().st_size > 0
+    assert any((run_dir / "tb").rglob("events.out.tfevents.*"))
+    rows = _monitor_rows(run_dir)
+    assert rows, "the monitor log records finished episodes"
+    assert all(int(r[1]) <= 64 for r in rows)  # the preset's training episode length
+    timesteps = json.loads((run_dir / "checkpoint.json").read_text())["timesteps"]
+    assert timesteps >= config["timesteps"]
+
+    assert main(["evaluate", str(run_dir), "--episodes", "2", "--max-episode-steps", "50"]) == 0
+    summary = json.loads((run_dir / "eval-pybullet" / "summary.json").read_text())
+    assert summary["episodes"] == 2
+    assert 0.0 <= summary["success_rate"] <= 1.0
+    episodes = list(csv.DictReader((run_dir / "eval-pybullet" / "episodes.csv").read_text().splitlines()))
+    assert [int(e["seed"]) for e in episodes] == [10_000, 10_001]
+    for e in episodes:
+        assert int(e["steps"]) <= 50
+        assert np.isfinite(float(e["episode_return"]))
+
+
+def test_ik_reference_reaches_every_target(tmp_path: Path) -> None:
+    run_dir = tmp_path / "ik"
+    assert main(["train", "--algo", "ik", "--out", str(run_dir)]) == 0
+    assert main(["evaluate", str(run_dir), "--episodes", "10"]) == 0
+    summary = json.loads((run_dir / "eval-pybullet" / "summary.json").read_text())
+    assert summary["success_rate"] == 1.0
+    assert 1 < summary["steps_to_goal_mean"] < 100
+    assert summary["jerk_mean"] > 0
+
+
+def test_same_seed_gives_the_same_evaluation(tmp_path: Path) -> None:
+    from armreach_core.rl.evaluate import evaluate_run
+
+    run_dir = tmp_path / "ik"
+    main(["train", "--algo", "ik", "--out", str(run_dir)])
+    a = evaluate_run(run_dir, episodes=3)
+    b = evaluate_run(run_dir, episodes=3)
+    assert a.episodes == b.episodes
+
+
+def test_interrupt_then_resume_continues_the_step_count(tmp_path: Path, tiny: str) -> None:
+    run_dir = tmp_path / "run"
+    cmd = [sys.executable, "-m", "armreach_core.cli", "train", "--algo", "ddpg", "--preset", tiny]
+    proc = subprocess.Popen(
+        [*cmd, "--steps", "100000", "--out", str(run_dir)], stderr=subprocess.PIPE, text=True, env=os.environ.copy()
+    )
+    deadline = time.time() + 60
+    while not (run_dir / "checkpoint.json").exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.2)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "armreach train --resume" in err
+    stopped_at = json.loads((run_dir / "checkpoint.json").read_text())["timesteps"]
+    assert 100 <= stopped_at < 100_000
+    assert not (run_dir / "model.zip").exists()
+    rows_before = _monitor_rows(run_dir)
+
+    assert main(["train", "--resume", str(run_dir), "--steps", str(stopped_at + 150)]) == 0
+    assert json.loads((run_dir / "checkpoint.json").read_text())["timesteps"] == stopped_at + 150
+    assert (run_dir / "model.zip").is_file()
+    rows_after = _monitor_rows(run_dir)
+    assert rows_after[: len(rows_before)] == rows_before  # nothing lost
+    assert len(rows_after) > len(rows_before)
+    assert (run_dir / "command.txt").read_text().count("# ") == 2
+
+
+def test_bad_run_folders_give_clear_errors(tmp_path: Path, tiny: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["evaluate", str(tmp_path)]) == 2
+    assert "not a run folder" in capsys.readouterr().err
+    run_dir = tmp_path / "run"
+    assert main(["train", "--algo", "ddpg", "--preset", tiny, "--steps", "100", "--out", str(run_dir)]) == 0
+    assert main(["train", "--algo", "ddpg", "--preset", tiny, "--out", str(run_dir)]) == 2
+    assert "already holds a run" in capsys.readouterr().err
+    (run_dir / "checkpoint.zip").write_bytes(b"not a zip")
+    config = runs.read_config(run_dir) | {"timesteps": 200}
+    with pytest.raises(ConfigError, match="cannot load .*checkpoint.zip"):
+        train(config, run_dir, resume=True, stream=None)
+    (run_dir / "model.zip").write_bytes(b"junk")
+    (run_dir / "checkpoint.zip").unlink()
+    assert main(["evaluate", str(run_dir), "--episodes", "1"]) == 2
+    assert "damaged" in capsys.readouterr().err
+
+
+def test_atomic_write_keeps_the_old_file_when_the_writer_fails(tmp_path: Path) -> None:
+    path = tmp_path / "f.txt"
+    runs.atomic_write_text(path, "old")
+
+    def fail(tmp: Path) -> None:
+        tmp.write_text("half")
+        raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"):
+        runs.atomic_save(path, fail)
+    assert path.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["f.txt"]
