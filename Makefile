@@ -4,19 +4,23 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install test test-all lint demo clean
+.PHONY: install test test-no-mujoco test-all lint demo clean
 
-$(STAMP): pyproject.toml backends/pybullet/pyproject.toml constraints-cpu.txt
+$(STAMP): pyproject.toml backends/pybullet/pyproject.toml backends/mujoco/pyproject.toml constraints-cpu.txt
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt torch
-	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt -e ".[dev]" -e backends/pybullet
+	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt -e ".[dev]" -e backends/pybullet -e backends/mujoco
 	touch $(STAMP)
 
 install: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -m "not slow" -q
+
+# The same suite with mujoco unimportable: MuJoCo is optional, so everything else must pass without it.
+test-no-mujoco: $(STAMP)
+	ARMREACH_TEST_HIDE=mujoco $(BIN)/python -m pytest -m "not slow" -q
 
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q

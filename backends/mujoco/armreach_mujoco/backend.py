@@ -20,30 +20,43 @@ Position control, matched to PyBullet
     arm therefore holds its pose against gravity exactly and closes 20 % of the remaining
     error per physics step. MuJoCo reproduces this with
 
-    * PyBullet's URDF reader gives a moving link without ``<inertial>`` (``tool0``) 1 kg and
-      1 kg m^2 on each axis, which adds ~1 kg m^2 to every joint's inertia; this backend
-      does the same (:data:`MISSING_INERTIAL`), without which the light wrists of ar6 move
-      ~50x faster than in PyBullet;
+    * PyBullet's URDF reader gives a moving link without ``<inertial>`` (a bare ``tool0``)
+      1 kg and 1 kg m^2 on each axis, which adds ~1 kg m^2 to every joint's inertia; this
+      backend does the same (:data:`MISSING_INERTIAL`), without which light wrists move
+      ~50x faster than in PyBullet (the bundled ar6 now gives ``tool0`` a 1 g inertial, and
+      xarm6 has none missing, so neither needs it);
     * a position actuator forming a velocity servo ``force = kv * (lambda * (target - q) - qd)``
       with ``lambda = POSITION_GAIN / dt`` (``kp = kv * lambda``) and
       ``kv = SERVO_DAMPING * M_ii(home) / dt``. A true constraint is ``kv -> inf``; but MuJoCo
       clamps the force *before* the implicit integrator divides it by ``1 + kv dt / M``, so
-      a large ``kv`` clamps too early and chatters (bang-bang) on the wrists. ``kv = 2 M/dt``
-      was the best compromise;
+      a large ``kv`` clamps too early and chatters (bang-bang). ``kv = 2 M/dt`` was the best
+      compromise;
     * gravity compensation routed through the actuators (``gravcomp`` on the arm's bodies,
       ``actuatorgravcomp`` on its joints), so the servo holds the pose like PyBullet's motor;
       the joint's ``actuatorfrcrange`` = URDF effort bounds servo + gravity together;
     * armature :data:`ARMATURE` = 0.01 (xarm6's wrist drifts without it; 0.1 is too much);
       ``implicitfast`` integrator.
 
-    Matched with a script (not shipped) that drives both backends from home with the same
-    seeded sequence of targets ``q + U(-1, 1) * 0.05`` and with an IK-scripted reach for 200
-    control steps, on ar6 and pybullet_data's xarm6, over a grid of ``SERVO_DAMPING``
-    (0.5-8), ``SERVO_GAIN_SCALE`` (0.9-1.1) and ``ARMATURE`` (0-0.1). Result (end-effector
-    RMS gap): ar6 random 19 mm (the random walk touches the ground from step ~80), ar6
-    scripted 1.1 mm, xarm6 random 3.8 mm, xarm6 scripted 1.2 mm. The remaining gap comes
-    from force saturation: 0.05 rad steps saturate both motors for the first substeps, and
-    a constraint solver and a clamped force disagree there.
+    Matched with ``armreach parity`` (:mod:`armreach_core.parity`): both backends start at
+    home and run the same seeded sequence of actions ``U(-1, 1)`` (targets ``q + 0.05 a``)
+    and a closed-loop IK reach to the seeded target, for 200 control steps, on ar6 and
+    pybullet_data's xarm6, and on the one-step error (both engines started from PyBullet's
+    state at every step of those runs). Searched: ``SERVO_DAMPING`` 1-4 (and per joint),
+    ``SERVO_GAIN_SCALE`` 0.9-1.1, ``ARMATURE`` 0-0.02, with and without the URDF damping
+    (PyBullet's motor cancels it), ``kv`` from ``M_ii`` at the current pose every control
+    step, and the force limit on the joint (``actuatorfrcrange`` only, ``SERVO_DAMPING``
+    2-20). Nothing beat the values above by more than the seed-to-seed spread.
+    End-effector RMS gap, seed 0 (mean over seeds 0-9): ar6 random 12.5 mm (11.8),
+    ar6 scripted 0.7 mm (1.2), xarm6 random 3.7 mm (5.1), xarm6 scripted 1.6 mm (1.8).
+    The remaining gap comes from force saturation:
+    PyBullet's motor applies exactly the impulse it needs when that is below the effort
+    limit, whereas MuJoCo's servo saturates as soon as ``kv * (lambda e - qd)`` (which
+    is ``SERVO_DAMPING`` times the force needed) passes the limit, and then drops the
+    implicit damping of that actuator, so joints at the edge of saturation overshoot and
+    chatter for a few physics steps. This leaves ~1 mm of end-effector difference per
+    control step on ar6 under random actions; the random sequence's targets are
+    relative to each engine's own angles, so these add up like a random walk, while the
+    closed-loop reach corrects them.
 
 Contacts
     With ``self_collision`` off, the arm's collision geoms collide with the ground only

@@ -1,0 +1,84 @@
+"""``armreach parity``: kinematic and dynamic parity and speed of two or more backends on one URDF."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from armreach_core.parity import ParityReport, markdown, run_parity
+
+
+def add_parser(sub: Any) -> None:
+    parser = sub.add_parser("parity", help="compare backends on one URDF: FK, trajectories, speed")
+    parser.add_argument("--urdf", default=None, help="URDF of the arm (default: the bundled ar6)")
+    parser.add_argument("--ee-link", default=None, help="end-effector link (default: the robot's)")
+    parser.add_argument(
+        "--backends",
+        nargs="+",
+        default=["pybullet", "mujoco"],
+        metavar="NAME",
+        help="backends to compare, the first is the reference (default: pybullet mujoco)",
+    )
+    parser.add_argument("--steps", type=int, default=200, help="env steps per control sequence (default: 200)")
+    parser.add_argument(
+        "--configs", type=int, default=1000, help="random configurations for the FK check (default: 1000)"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of configurations, actions, target (default: 0)")
+    parser.add_argument("--out", type=Path, default=None, help="output folder (default: runs/parity-<time>)")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    report = run_parity(args.backends, args.urdf, args.ee_link, steps=args.steps, configs=args.configs, seed=args.seed)
+    out: Path = args.out or Path("runs") / time.strftime("parity-%Y%m%d-%H%M%S")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "report.md").write_text(markdown(report))
+    (out / "parity.json").write_text(json.dumps(report.to_json(), indent=1) + "\n")
+    plot(report, out / "parity.png")
+    for name, kin in report.kinematic.items():
+        print(f"{name:>10}  FK max error {kin.max_m:.1e} m   {report.steps_per_second(name):,.0f} env steps/s")
+    for name in report.backends[1:]:
+        for sequence in report.trajectories:
+            gap = report.gap(sequence, name)
+            print(
+                f"{name:>10}  {sequence:<8} vs {report.reference}: joint RMS {gap.joint_rms_rad:.4f} rad, "
+                f"end effector RMS {gap.ee_rms_m * 1e3:.2f} mm (max {gap.ee_max_m * 1e3:.2f} mm)"
+            )
+    failures = report.failures()
+    print("PASS: every number is within tolerance" if not failures else "FAIL: " + "; ".join(failures))
+    print(f"saved {out / 'report.md'}, {out / 'parity.json'} and {out / 'parity.png'}")
+    return 0 if not failures else 1
+
+
+def plot(report: ParityReport, path: Path) -> None:
+    """Joint trajectories of every backend overlaid (one row per joint) and the end-effector gap over time."""
+    from matplotlib.figure import Figure
+
+    sequences = list(report.trajectories)
+    dof = len(report.joint_names)
+    fig = Figure(figsize=(5.5 * len(sequences), 1.7 * (dof + 1)), layout="constrained")
+    axes = fig.subplots(dof + 1, len(sequences), sharex=True, squeeze=False)
+    time_s = (np.arange(report.steps) + 1) * report.control_dt
+    for col, sequence in enumerate(sequences):
+        runs = report.trajectories[sequence]
+        axes[0, col].set_title(f"{sequence} ({report.robot})")
+        for row, joint in enumerate(report.joint_names):
+            ax = axes[row, col]
+            for style, (name, run) in zip(("-", "--", ":", "-."), runs.items(), strict=False):
+                ax.plot(time_s, run.q[:, row], style, linewidth=1.2, label=name)
+            ax.set_ylabel(f"{joint}\n(rad)", fontsize=7)
+            ax.tick_params(labelsize=7)
+        ax = axes[dof, col]
+        for name in report.backends[1:]:
+            ax.plot(time_s, report.gap(sequence, name).ee_error_m * 1e3, label=f"{name} vs {report.reference}")
+        ax.set_ylabel("end-effector\ngap (mm)", fontsize=7)
+        ax.set_xlabel("time (s)")
+        ax.tick_params(labelsize=7)
+        ax.legend(fontsize=7)
+        axes[0, col].legend(fontsize=7)
+    fig.savefig(path, dpi=110)
