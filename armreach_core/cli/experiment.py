@@ -17,7 +17,7 @@ def add_parser(sub: Any) -> None:
     parser.add_argument("--steps", type=int, default=None, help="env steps per run (default: the paper's 614,400)")
     parser.add_argument("--episodes", type=int, default=100, help="evaluation episodes per run (default: 100)")
     parser.add_argument("--backend", default="pybullet", help="physics backend (default: pybullet)")
-    parser.add_argument("--fast", action="store_true", help="add the `fast` preset's SAC+HER agent")
+    parser.add_argument("--fast", action="store_true", help="add the `fast` preset's agent")
     parser.add_argument("--out", type=Path, default=None, help="experiment folder (default: runs/experiment-...)")
     parser.set_defaults(run=run)
 

@@ -13,7 +13,9 @@ from armreach_core.rl.presets import ALGOS
 
 def add_parser(sub: Any) -> None:
     parser = sub.add_parser("train", help="train an agent (Stable-Baselines3) into a run folder")
-    parser.add_argument("--algo", choices=ALGOS, default="ddpg", help="algorithm (default: ddpg; ik trains nothing)")
+    parser.add_argument(
+        "--algo", choices=ALGOS, default=None, help="algorithm (default: the preset's own; ddpg for paper)"
+    )
     parser.add_argument("--preset", default="paper", help="bundled preset (paper, fast) or a YAML file")
     parser.add_argument("--task", default="reach", help="registered task (default: reach)")
     parser.add_argument("--backend", default="pybullet", help="physics backend (default: pybullet)")
@@ -23,6 +25,9 @@ def add_parser(sub: Any) -> None:
     parser.add_argument("--n-envs", type=int, default=None, help="parallel envs (default: the preset's, or 1)")
     parser.add_argument("--urdf", default=None, help="URDF of the arm (default: the task's robot)")
     parser.add_argument("--ee-link", default=None, help="end-effector link")
+    parser.add_argument(
+        "--threads", type=int, default=None, help="torch CPU threads (default: the preset's, else torch's)"
+    )
     parser.add_argument("--device", default="auto", help="torch device (default: auto)")
     parser.add_argument("--out", type=Path, default=None, help="run folder (default: runs/<algo>-<preset>-...)")
     parser.add_argument("--resume", type=Path, default=None, metavar="RUN", help="continue the run in RUN")
@@ -30,7 +35,7 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from armreach_core.rl.train import resolve_config, train
+    from armreach_core.rl.train import default_algo, resolve_config, train
 
     if args.resume is not None:
         run_dir: Path = args.resume
@@ -41,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         result = train(config, run_dir, resume=True, command=args.command_line)
     else:
         config = resolve_config(
-            algo=args.algo,
+            algo=args.algo or default_algo(args.preset, args.task),
             preset=args.preset,
             task=args.task,
             backend=args.backend,
@@ -52,8 +57,10 @@ def run(args: argparse.Namespace) -> int:
             urdf=args.urdf,
             ee_link=args.ee_link,
             device=args.device,
+            threads=args.threads,
         )
-        name = [config["algo"] + ("-her" if args.her else ""), config["preset"], config["backend"], f"s{args.seed}"]
+        her = "-her" if "her" in config["settings"] else ""
+        name = [config["algo"] + her, config["preset"], config["backend"], f"s{args.seed}"]
         run_dir = args.out or runs.default_run_dir("runs", name)
         if config["algo"] == "ik":
             runs.new_run_dir(run_dir)

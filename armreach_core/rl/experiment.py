@@ -21,7 +21,7 @@ from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
 from armreach_core.rl.evaluate import Evaluation, evaluate_run, save_evaluation
 from armreach_core.rl.metrics import MeanStd, convergence_episode, moving_average
-from armreach_core.rl.train import resolve_config, train
+from armreach_core.rl.train import default_algo, resolve_config, train
 
 #: The paper's numbers (Tables 2-4): PPO and DDPG, 614,400 steps, 100 evaluation episodes.
 PAPER = {
@@ -70,7 +70,8 @@ class ArmResult:
 def paper_arms(steps: int | None, fast: bool) -> list[Arm]:
     arms = [Arm("PPO", "ppo", "paper", steps=steps), Arm("DDPG", "ddpg", "paper", steps=steps)]
     if fast:
-        arms.append(Arm("SAC+HER (fast preset)", "sac", "fast", her=True))
+        algo = default_algo("fast")
+        arms.append(Arm(f"{algo.upper()} (fast preset)", algo, "fast"))
     return arms
 
 

@@ -35,6 +35,14 @@ class TrainResult:
     seconds: float
 
 
+def default_algo(preset: str, task: str = "reach") -> str:
+    """The algorithm a preset is for: its only one, else DDPG (the paper's best), else the first."""
+    algos = [a for a in load_preset(preset).algos(task) if a != "ik"]
+    if not algos:
+        raise ConfigError(f"preset {preset!r} has no learning algorithm for task {task!r}")
+    return algos[0] if len(algos) == 1 else ("ddpg" if "ddpg" in algos else algos[0])
+
+
 def resolve_config(
     *,
     algo: str,
@@ -49,10 +57,15 @@ def resolve_config(
     ee_link: str | None = None,
     device: str = "auto",
     eval_max_episode_steps: int = 2048,
+    threads: int | None = None,
 ) -> dict[str, Any]:
     """The full, explicit config of a new run (what ``config.yaml`` records)."""
     loaded = load_preset(preset)
     settings = loaded.get(task, algo)
+    if threads is not None:
+        if threads < 1:
+            raise ConfigError(f"--threads must be >= 1, got {threads}")
+        settings["torch_threads"] = int(threads)
     if her:
         if algo not in ("ddpg", "td3", "sac"):
             raise ConfigError(f"--her needs an off-policy algorithm (ddpg, td3, sac), not {algo!r}")
