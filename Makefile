@@ -31,7 +31,7 @@ lint: $(STAMP)
 	$(BIN)/mypy
 
 demo: $(STAMP)
-	$(BIN)/armreach rollout --out runs/demo
+	$(BIN)/armreach experiment paper --seeds 1 --steps 10000 --episodes 20 --fast --out runs/demo
 
 clean:
 	rm -rf $(VENV) build dist *.egg-info runs .pytest_cache .mypy_cache .ruff_cache
