@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import math
+import re
 import subprocess
 import sys
 import time
+from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from armreach_core import ArmEnv, ArmReach6DOFEnv, parity
+from armreach_core import ArmEnv, ArmReach6DOFEnv, URDFError, parity
 from armreach_core.backend import PhysicsConfig
 from armreach_core.ik import IKPolicy
 from armreach_core.robot import RobotModel
@@ -156,3 +158,164 @@ def test_close_is_idempotent_and_isolated():
     env_a.close()
     backend.close()
     env_b.close()
+
+
+# -- meshes MuJoCo cannot read (.ply, .dae): converted to .obj with trimesh into a cache folder
+
+#: (link, mesh file, box extents in m, origin z in m) of the arm written by _write_mesh_arm. The
+#: ``{ext}`` meshes are converted for MuJoCo; base.stl is read by MuJoCo (and PyBullet) itself.
+MESH_LINKS = (
+    ("base_link", "../meshes/base.stl", (0.12, 0.12, 0.06), 0.03),
+    ("link2", "../meshes/upper.{ext}", (0.08, 0.08, 0.2), 0.1),  # relative to the URDF's folder
+    ("link3", "package://testarm/meshes/fore.{ext}", (0.06, 0.06, 0.2), 0.1),
+)
+#: A PLY file that trimesh parses but that holds no surface.
+EMPTY_PLY = (
+    b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\n"
+    b"element face 0\nproperty list uchar int vertex_indices\nend_header\n"
+)
+
+
+def _write_mesh_arm(root: Path, ext: str) -> Path:
+    """A 6-joint serial arm laid out like a ROS package (``root/testarm/{urdf,meshes}``).
+
+    The links of MESH_LINKS have the same box mesh as visual and collision geometry; the
+    others are cylinders. Returns the URDF's path; its end effector is ``tool0``.
+    """
+    trimesh = pytest.importorskip("trimesh")
+    if ext == "dae":
+        pytest.importorskip("collada")  # trimesh reads and writes COLLADA through pycollada
+    package = root / "testarm"
+    (package / "urdf").mkdir(parents=True)
+    (package / "meshes").mkdir()
+
+    def inertial(z: float) -> str:
+        return (
+            f'<inertial><origin xyz="0 0 {z}"/><mass value="1.0"/>'
+            '<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial>'
+        )
+
+    def shapes(geometry: str, z: float) -> str:
+        return "".join(
+            f'<{tag}><origin xyz="0 0 {z}"/><geometry>{geometry}</geometry></{tag}>' for tag in ("visual", "collision")
+        )
+
+    links = {f"link{i}": inertial(0.05) + shapes('<cylinder radius="0.03" length="0.1"/>', 0.05) for i in range(1, 7)}
+    for name, filename, extents, z in MESH_LINKS:
+        filename = filename.format(ext=ext)
+        trimesh.creation.box(extents=extents).export(package / "meshes" / Path(filename).name)
+        links[name] = inertial(z) + shapes(f'<mesh filename="{filename}"/>', z)
+    chain = (  # joint, parent, child, origin z, axis
+        ("joint1", "base_link", "link1", 0.06, "0 0 1"),
+        ("joint2", "link1", "link2", 0.1, "0 1 0"),
+        ("joint3", "link2", "link3", 0.2, "0 1 0"),
+        ("joint4", "link3", "link4", 0.2, "0 0 1"),
+        ("joint5", "link4", "link5", 0.1, "0 1 0"),
+        ("joint6", "link5", "link6", 0.1, "0 0 1"),
+    )
+    joints = "".join(
+        f'<joint name="{name}" type="revolute"><parent link="{parent}"/><child link="{child}"/>'
+        f'<origin xyz="0 0 {z}"/><axis xyz="{axis}"/>'
+        '<limit lower="-2.5" upper="2.5" effort="50" velocity="3"/><dynamics damping="0.5"/></joint>'
+        for name, parent, child, z, axis in chain
+    )
+    urdf = package / "urdf" / "testarm.urdf"
+    urdf.write_text(
+        '<?xml version="1.0"?>\n<robot name="testarm">\n'
+        '<link name="world"/>\n<joint name="world_joint" type="fixed"><parent link="world"/>'
+        '<child link="base_link"/></joint>\n'
+        + "".join(f'<link name="{name}">{body}</link>\n' for name, body in sorted(links.items()))
+        + joints
+        + '\n<link name="tool0"><inertial><mass value="0.001"/>'
+        '<inertia ixx="1e-6" ixy="0" ixz="0" iyy="1e-6" iyz="0" izz="1e-6"/></inertial></link>\n'
+        '<joint name="tool0_joint" type="fixed"><parent link="link6"/><child link="tool0"/>'
+        '<origin xyz="0 0 0.1"/></joint>\n</robot>\n'
+    )
+    return urdf
+
+
+def _worst_fk_error(backend, robot: RobotModel, configs) -> float:
+    """Largest end-effector gap (m) between ``backend`` and the URDF's kinematics over ``configs``."""
+    worst = 0.0
+    for q, expected in zip(configs, robot.forward_kinematics(configs), strict=True):
+        backend.reset_joints(q)
+        worst = max(worst, float(np.abs(backend.link_position(robot.ee_link) - expected).max()))
+    return worst
+
+
+@pytest.fixture
+def mesh_cache(tmp_path, monkeypatch) -> Path:
+    """The converted-mesh folder, under tmp_path; compiled models go to a private cache."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setattr(mjb, "_cache", OrderedDict())  # the models built here never reach other tests
+    return tmp_path / "cache" / "armreach" / "mujoco-meshes"
+
+
+@pytest.mark.parametrize("ext", ["ply", "dae"])
+def test_meshes_mujoco_cannot_read_are_converted_and_cached(tmp_path, mesh_cache, monkeypatch, ext):
+    urdf = _write_mesh_arm(tmp_path, ext)
+    import trimesh
+
+    # PyBullet reads .dae (and .stl) itself but no .ply: the .ply arm runs on MuJoCo only.
+    backends = ["mujoco", "pybullet"] if ext == "dae" else ["mujoco"]
+    if "pybullet" in backends:
+        pytest.importorskip("pybullet")
+    for name in backends:
+        env = ArmReach6DOFEnv(backend=name, urdf=urdf, ee_link="tool0")
+        robot, backend = env.unwrapped.robot, env.unwrapped.backend
+        assert robot.dof == 6
+        obs, _ = env.reset(seed=3)
+        assert np.isfinite(obs).all()
+        env.action_space.seed(3)
+        for _ in range(5):
+            obs, reward, *_ = env.step(env.action_space.sample())
+            assert np.isfinite(obs).all() and np.isfinite(reward)
+            q, _ = backend.joint_state()
+            np.testing.assert_allclose(backend.link_position("tool0"), robot.forward_kinematics(q), rtol=0, atol=1e-6)
+        configs = np.vstack([robot.home, robot.sample_configurations(np.random.default_rng(7), 8)])
+        worst = _worst_fk_error(backend, robot, configs)
+        assert worst < 1e-6, f"{name} FK differs from the URDF by {worst:.2e} m"
+        if name == "mujoco":
+            model = backend.model
+            assert model.nmesh == 3
+            assert int(np.sum(model.geom_type == mujoco.mjtGeom.mjGEOM_MESH)) == 6  # visual and collision
+        env.close()
+
+    # one .obj per converted mesh (<stem>-<digest>.obj), the same box as the original; base.stl is used as it is
+    converted = {path.name.split("-")[0]: path for path in mesh_cache.glob("*.obj")}
+    assert sorted(converted) == ["fore", "upper"]
+    assert sorted(p.suffix for p in mesh_cache.iterdir()) == [".obj", ".obj"]  # no shared material file
+    for _, filename, extents, _ in MESH_LINKS[1:]:
+        mesh = trimesh.load(converted[Path(filename).stem], force="mesh")
+        np.testing.assert_allclose(mesh.extents, extents, atol=1e-9)
+
+    # converted once: a fresh build reads the cached .obj files without trimesh
+    stamps = {path: path.stat().st_mtime_ns for path in converted.values()}
+    mjb.clear_cache()
+
+    def no_conversion(*args, **kwargs):
+        raise AssertionError("the mesh was converted again")
+
+    monkeypatch.setattr(trimesh, "load", no_conversion)
+    robot = RobotModel(urdf, ee_link="tool0")
+    mjb.MuJoCoBackend(robot, PhysicsConfig()).close()
+    assert {path: path.stat().st_mtime_ns for path in converted.values()} == stamps
+
+
+@pytest.mark.parametrize(
+    ("ext", "stem", "content"),
+    [
+        ("ply", "upper", b"\x00not a mesh\xff" * 8),  # referenced by a relative path
+        ("ply", "upper", EMPTY_PLY),  # parses, but MuJoCo would reject the empty copy
+        ("dae", "fore", b"\x00not a mesh\xff" * 8),  # referenced through package://
+    ],
+    ids=["garbage-ply", "empty-ply", "garbage-dae"],
+)
+def test_unreadable_mesh_is_a_urdf_error_naming_the_file(tmp_path, mesh_cache, ext, stem, content):
+    urdf = _write_mesh_arm(tmp_path, ext)
+    bad = (urdf.parent.parent / "meshes" / f"{stem}.{ext}").resolve()
+    bad.write_bytes(content)
+    with pytest.raises(URDFError, match=re.escape(repr(str(bad)))) as caught:
+        ArmReach6DOFEnv(backend="mujoco", urdf=urdf, ee_link="tool0")
+    assert "convert it to .stl or .obj" in str(caught.value)
+    assert not list(mesh_cache.glob(f"{stem}-*"))  # nothing half-written is left to be reused

@@ -88,7 +88,7 @@ import numpy.typing as npt
 from lxml import etree
 
 from armreach_core.backend import Backend, Camera, PhysicsConfig
-from armreach_core.errors import ArmReachError, BackendUnavailableError
+from armreach_core.errors import ArmReachError, BackendUnavailableError, URDFError
 from armreach_core.robot import FloatArray, RobotModel
 
 
@@ -167,15 +167,26 @@ def _convert_mesh(path: Path) -> Path:
     if not out.is_file():
         import trimesh
 
+        fix = "fix the file, or convert it to .stl or .obj and point the URDF at that"
         try:
             mesh = trimesh.load(str(path), force="mesh")
         except Exception as exc:
-            raise ArmReachError(
-                f"MuJoCo cannot read mesh {str(path)!r} and trimesh could not convert it: {exc}"
+            detail = str(exc) if type(exc).__name__ in str(exc) else f"{type(exc).__name__}: {exc}"
+            raise URDFError(
+                f"MuJoCo cannot read mesh {str(path)!r} and trimesh could not convert it ({detail}); {fix}"
             ) from exc
+        vertices, faces = len(getattr(mesh, "vertices", ())), len(getattr(mesh, "faces", ()))
+        if faces == 0 or vertices < 4:  # MuJoCo rejects it, naming only the converted copy
+            raise URDFError(
+                f"mesh {str(path)!r} has {vertices} vertices and {faces} triangles once read by trimesh, "
+                f"and MuJoCo needs at least 4 vertices and a triangle; {fix}"
+            )
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = out.with_suffix(f".{os.getpid()}.tmp.obj")
-        mesh.export(str(tmp))
+        from trimesh.exchange.obj import export_obj
+
+        # Geometry only: a material file would be shared by every converted mesh in the folder.
+        tmp.write_text(export_obj(mesh, include_texture=False, write_texture=False), encoding="utf-8")
         os.replace(tmp, out)
     return out
 
