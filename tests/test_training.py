@@ -82,8 +82,9 @@ def test_train_then_evaluate(tmp_path: Path, tiny: str, algo: str, extra: list[s
     rows = _monitor_rows(run_dir)
     assert rows, "the monitor log records finished episodes"
     assert all(int(r[1]) <= 64 for r in rows)  # the preset's training episode length
-    timesteps = json.loads((run_dir / "checkpoint.json").read_text())["timesteps"]
-    assert timesteps >= config["timesteps"]
+    progress = json.loads((run_dir / "checkpoint.json").read_text())
+    assert progress["timesteps"] >= config["timesteps"]
+    assert progress["train_seconds"] > 0
 
     assert main(["evaluate", str(run_dir), "--episodes", "2", "--max-episode-steps", "50"]) == 0
     summary = json.loads((run_dir / "eval-pybullet" / "summary.json").read_text())
@@ -130,13 +131,16 @@ def test_interrupt_then_resume_continues_the_step_count(tmp_path: Path, tiny: st
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
     assert "armreach train --resume" in err
-    stopped_at = json.loads((run_dir / "checkpoint.json").read_text())["timesteps"]
+    progress = json.loads((run_dir / "checkpoint.json").read_text())
+    stopped_at = progress["timesteps"]
     assert 100 <= stopped_at < 100_000
     assert not (run_dir / "model.zip").exists()
     rows_before = _monitor_rows(run_dir)
 
     assert main(["train", "--resume", str(run_dir), "--steps", str(stopped_at + 150)]) == 0
-    assert json.loads((run_dir / "checkpoint.json").read_text())["timesteps"] == stopped_at + 150
+    resumed = json.loads((run_dir / "checkpoint.json").read_text())
+    assert resumed["timesteps"] == stopped_at + 150
+    assert resumed["train_seconds"] > progress["train_seconds"]  # the clock continues too
     assert (run_dir / "model.zip").is_file()
     rows_after = _monitor_rows(run_dir)
     assert rows_after[: len(rows_before)] == rows_before  # nothing lost

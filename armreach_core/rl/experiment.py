@@ -21,7 +21,7 @@ from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
 from armreach_core.rl.evaluate import Evaluation, evaluate_run, save_evaluation
 from armreach_core.rl.metrics import MeanStd, convergence_episode, moving_average
-from armreach_core.rl.train import default_algo, resolve_config, train
+from armreach_core.rl.train import default_algo, read_progress, resolve_config, train
 
 #: The paper's numbers (Tables 2-4): PPO and DDPG, 614,400 steps, 100 evaluation episodes.
 PAPER = {
@@ -90,6 +90,18 @@ def episode_rewards(run_dir: Path) -> npt.NDArray[np.float64]:
     return np.asarray([r for _, r in rows], dtype=np.float64)
 
 
+def training_seconds(run_dir: Path, fallback: float) -> float:
+    """Training wall-clock of a run: from its checkpoint record, else its monitor log's last time."""
+    recorded = read_progress(run_dir).get("train_seconds")
+    if recorded:
+        return float(recorded)
+    times = [0.0]
+    for path in (run_dir / "monitor").glob("*.monitor.csv"):
+        lines = [line for line in path.read_text(encoding="utf-8").splitlines() if not line.startswith("#")]
+        times += [float(record["t"]) for record in csv.DictReader(lines)]
+    return max(times) if max(times) > 0 else fallback
+
+
 def _log(stream: TextIO | None, text: str) -> None:
     if stream is not None:
         print(text, file=stream, flush=True)
@@ -133,7 +145,7 @@ def run_experiment(
                     raise KeyboardInterrupt
             else:
                 _log(stream, f"reusing {run_dir}")
-            result.train_seconds.append(time.perf_counter() - t0)
+            result.train_seconds.append(training_seconds(run_dir, time.perf_counter() - t0))
             evaluation = evaluate_run(run_dir, episodes=episodes, backend=backend)
             summary = save_evaluation(evaluation, run_dir / f"eval-{backend}")
             _log(stream, f"  success {100 * summary['success_rate']:.0f}% over {episodes} episodes")

@@ -8,6 +8,7 @@ Layout of ``runs/<name>/``::
     monitor.csv        one row per training episode (reward, length, time, success)
     tb/                TensorBoard logs
     checkpoint.zip     the latest checkpoint (+ checkpoint_replay.pkl for off-policy)
+    checkpoint.json    its step count and the training wall-clock so far
     model.zip          the final model, written when training completes
     eval-<backend>/    what `armreach evaluate` writes
 
@@ -41,6 +42,7 @@ MONITOR = "monitor.csv"
 MODEL = "model.zip"
 CHECKPOINT = "checkpoint.zip"
 REPLAY = "checkpoint_replay.pkl"
+PROGRESS = "checkpoint.json"
 TRUST_NOTE = (
     "model and checkpoint files are pickles: loading one runs code from it; load only runs you or someone "
     "you trust produced"

@@ -8,6 +8,7 @@ checkpoints are written atomically, so a killed run restarts from the last one.
 from __future__ import annotations
 
 import contextlib
+import json
 import signal
 import sys
 import time
@@ -114,7 +115,9 @@ class _Stop:
                 signal.signal(s, h)
 
 
-def _make_callback(run_dir: Path, total: int, every: int, stop: _Stop, stream: TextIO | None) -> Any:
+def _make_callback(
+    run_dir: Path, total: int, every: int, stop: _Stop, stream: TextIO | None, base_seconds: float
+) -> Any:
     from stable_baselines3.common.callbacks import BaseCallback
 
     class Callback(BaseCallback):
@@ -136,7 +139,7 @@ def _make_callback(run_dir: Path, total: int, every: int, stop: _Stop, stream: T
                 if "episode" in info:
                     self.successes = (self.successes + [float(info.get("is_success", False))])[-100:]
             if steps - self.last_save >= every:
-                save_checkpoint(self.model, run_dir)
+                save_checkpoint(self.model, run_dir, base_seconds + time.perf_counter() - self.t0)
                 self.last_save = steps
             now = time.perf_counter()
             if stream is not None and now - self.last_print > (2.0 if stream.isatty() else 30.0):
@@ -165,12 +168,23 @@ def _make_callback(run_dir: Path, total: int, every: int, stop: _Stop, stream: T
     return Callback()
 
 
-def save_checkpoint(model: Any, run_dir: Path) -> None:
-    """Model, then replay buffer, then the step count; each file replaced atomically."""
+def save_checkpoint(model: Any, run_dir: Path, train_seconds: float) -> None:
+    """Model, then replay buffer, then the step count and training time; each file replaced atomically."""
     if hasattr(model, "replay_buffer") and model.replay_buffer is not None:
         runs.atomic_save(run_dir / runs.REPLAY, model.save_replay_buffer)
     runs.atomic_save(run_dir / runs.CHECKPOINT, model.save)
-    runs.write_json(run_dir / "checkpoint.json", {"timesteps": int(model.num_timesteps)})
+    runs.write_json(
+        run_dir / runs.PROGRESS, {"timesteps": int(model.num_timesteps), "train_seconds": round(train_seconds, 2)}
+    )
+
+
+def read_progress(run_dir: Path) -> dict[str, Any]:
+    """``{"timesteps", "train_seconds"}`` of the last checkpoint (zeros when there is none)."""
+    path = run_dir / runs.PROGRESS
+    if not path.is_file():
+        return {"timesteps": 0, "train_seconds": 0.0}
+    data: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+    return data
 
 
 def _load_checkpoint(config: dict[str, Any], run_dir: Path, env: Any) -> Any:
@@ -225,18 +239,24 @@ def train(
             model.tensorboard_log = str(run_dir / "tb")
         else:
             model = build_model(algo, settings, env, int(config["seed"]), run_dir / "tb", config.get("device", "auto"))
+        base_seconds = float(read_progress(run_dir).get("train_seconds", 0.0)) if resume else 0.0
         total = int(config["timesteps"])
         remaining = total - int(model.num_timesteps)
         stop = _Stop()
         t0 = time.perf_counter()
         if remaining > 0:
             callback = _make_callback(
-                run_dir, total, int(settings.get("checkpoint_every", DEFAULT_CHECKPOINT_EVERY)), stop, stream
+                run_dir,
+                total,
+                int(settings.get("checkpoint_every", DEFAULT_CHECKPOINT_EVERY)),
+                stop,
+                stream,
+                base_seconds,
             )
             with stop.installed(), warnings.catch_warnings():
                 warnings.filterwarnings("ignore", message=".*mini-batch size.*", category=UserWarning)
                 model.learn(remaining, callback=callback, reset_num_timesteps=False, tb_log_name=algo)
-        save_checkpoint(model, run_dir)
+        save_checkpoint(model, run_dir, base_seconds + time.perf_counter() - t0)
         if not stop.requested:
             runs.atomic_save(run_dir / runs.MODEL, model.save)
         return TrainResult(run_dir, int(model.num_timesteps), total, stop.requested, time.perf_counter() - t0)
