@@ -75,3 +75,44 @@ def test_create_step_close_cycles_leak_no_clients_or_memory():
     growth = _rss_mb() - before
     assert not any(pb.isConnected(physicsClientId=c) for c in set(clients))
     assert growth < 20.0, f"RSS grew by {growth:.1f} MB over 200 cycles"
+
+
+TETRAHEDRON_PLY = """ply
+format ascii 1.0
+element vertex 4
+property float x
+property float y
+property float z
+element face 4
+property list uchar int vertex_indices
+end_header
+0 0 0
+0.05 0 0
+0 0.05 0
+0 0 0.05
+3 0 1 2
+3 0 1 3
+3 0 2 3
+3 1 2 3
+"""
+
+
+def test_a_mesh_format_pybullet_cannot_read_is_a_urdf_error(tmp_path, ar6_urdf):
+    import pybullet as pb
+
+    from armreach_core import URDFError
+    from armreach_core.backend import PhysicsConfig
+    from armreach_core.env import load_backend_class
+    from armreach_core.robot import RobotModel
+
+    (tmp_path / "tip.ply").write_text(TETRAHEDRON_PLY)
+    text = ar6_urdf.read_text()
+    geometry = '<geometry><mesh filename="tip.ply"/></geometry>'
+    text = text.replace('<link name="tool0">', f'<link name="tool0"><visual>{geometry}</visual>', 1)
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(text)
+    robot = RobotModel(urdf)
+    connected_before = sum(pb.isConnected(i) for i in range(64))
+    with pytest.raises(URDFError, match=r"PyBullet reads only \.obj, \.stl, \.dae meshes .*tip\.ply.*convert"):
+        load_backend_class("pybullet")(robot, PhysicsConfig())
+    assert sum(pb.isConnected(i) for i in range(64)) == connected_before  # the client was not leaked

@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.backend import Backend, Camera, PhysicsConfig
-from armreach_core.errors import ArmReachError
+from armreach_core.errors import ArmReachError, URDFError
 from armreach_core.robot import FloatArray, RobotModel
 
 POSITION_GAIN = 0.2
@@ -27,6 +27,28 @@ GROUND_RGBA = (0.86, 0.87, 0.89, 1.0)
 
 log = logging.getLogger("armreach.pybullet")
 _libc = ctypes.CDLL(None)
+
+
+#: Mesh formats PyBullet's URDF loader reads.
+PYBULLET_MESHES = (".obj", ".stl", ".dae")
+
+
+def _load_failure(robot: RobotModel, detail: str) -> str:
+    """Why PyBullet refused a URDF that armreach's own parser accepted, and what to do."""
+    from lxml import etree
+
+    root = etree.fromstring(robot.parsed.resolved_xml)
+    unreadable = sorted(
+        {m.get("filename", "") for m in root.iter("mesh") if os.path.splitext(m.get("filename", ""))[1].lower()
+         not in PYBULLET_MESHES}
+    )  # fmt: skip
+    hint = (
+        f"PyBullet reads only {', '.join(PYBULLET_MESHES)} meshes and this URDF uses {', '.join(unreadable)}: "
+        "convert them (e.g. with trimesh) and point the URDF at the copies"
+        if unreadable
+        else "check the URDF with PyBullet's own loader for the details"
+    )
+    return f"PyBullet cannot load {robot.urdf_path} ({detail}); {hint}"
 
 
 @contextlib.contextmanager
@@ -91,10 +113,15 @@ class PyBulletBackend(Backend):
             path = os.path.join(tmp, "robot.urdf")
             with open(path, "wb") as handle:
                 handle.write(self.robot.parsed.resolved_xml)
-            with _engine_output_to_log():
-                body = pb.loadURDF(path, useFixedBase=True, flags=flags, physicsClientId=cid)
+            try:
+                with _engine_output_to_log():
+                    body = pb.loadURDF(path, useFixedBase=True, flags=flags, physicsClientId=cid)
+            except pb.error as exc:
+                pb.disconnect(physicsClientId=cid)
+                raise URDFError(_load_failure(self.robot, str(exc))) from None
         if body < 0:
-            raise ArmReachError(f"PyBullet failed to load {self.robot.urdf_path}")
+            pb.disconnect(physicsClientId=cid)
+            raise URDFError(_load_failure(self.robot, "loadURDF returned no body"))
         self._body = body
         joint_index: dict[str, int] = {}
         self._link_index: dict[str, int] = {pb.getBodyInfo(body, physicsClientId=cid)[0].decode(): -1}
