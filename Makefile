@@ -19,8 +19,9 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -m "not slow" -q
 
 # The same suite with mujoco unimportable: MuJoCo is optional, so everything else must pass without it.
+# Training tests use PyBullet only and already ran in `make test`.
 test-no-mujoco: $(STAMP)
-	ARMREACH_TEST_HIDE=mujoco $(BIN)/python -m pytest -m "not slow" -q
+	ARMREACH_TEST_HIDE=mujoco $(BIN)/python -m pytest -m "not slow and not training" -q
 
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -13,6 +13,8 @@ from armreach_core.cli import main
 from armreach_core.rl.experiment import Arm, run_experiment
 from armreach_core.rl.report import write_report
 
+pytestmark = pytest.mark.training
+
 TINY = """
 description: tiny
 reach:
@@ -55,3 +57,24 @@ def test_experiment_command(tmp_path: Path) -> None:
     out = tmp_path / "exp"
     assert main(["experiment", "paper", "--seeds", "1", "--steps", "300", "--episodes", "2", "--out", str(out)]) == 0
     assert (out / "report.md").is_file()
+
+
+def test_an_experiment_folder_is_not_silently_reused_with_other_settings(tmp_path: Path) -> None:
+    from armreach_core.errors import ConfigError
+
+    preset = tmp_path / "tiny.yaml"
+    preset.write_text(TINY)
+    out = tmp_path / "exp"
+    log = io.StringIO()
+    run_experiment(out, [Arm("DDPG", "ddpg", str(preset))], episodes=1, stream=log, eval_max_episode_steps=20)
+    # Longer runs with the same settings extend the finished one...
+    log = io.StringIO()
+    results, _ = run_experiment(
+        out, [Arm("DDPG", "ddpg", str(preset), steps=200)], episodes=1, stream=log, eval_max_episode_steps=20
+    )
+    assert "extending DDPG" in log.getvalue()
+    assert results[0].timesteps == [200]
+    # ... while other settings are refused instead of being mixed into one table.
+    preset.write_text(TINY.replace("batch_size: 16", "batch_size: 8"))
+    with pytest.raises(ConfigError, match=r"holds a run with other settings \(batch_size: 16 here, 8 asked\)"):
+        run_experiment(out, [Arm("DDPG", "ddpg", str(preset), steps=200)], episodes=1, eval_max_episode_steps=20)

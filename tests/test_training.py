@@ -20,6 +20,8 @@ from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
 from armreach_core.rl.train import train
 
+pytestmark = pytest.mark.training
+
 TINY = """
 description: a few hundred steps, for tests
 reach:
@@ -177,3 +179,67 @@ def test_atomic_write_keeps_the_old_file_when_the_writer_fails(tmp_path: Path) -
         runs.atomic_save(path, fail)
     assert path.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["f.txt"]
+
+
+def test_her_waits_for_the_first_episode(tiny: str, tmp_path: Path) -> None:
+    from armreach_core.rl.train import resolve_config
+
+    config = resolve_config(algo="ddpg", preset="paper", her=True)
+    assert config["settings"]["learning_starts"] == 2048  # the paper's episode length
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("reach:\n  sac:\n    env: {max_episode_steps: 100}\n    learning_starts: 10\n    her: {}\n")
+    with pytest.raises(ConfigError, match=r"learning_starts \(10\) must be at least the training episode length"):
+        resolve_config(algo="sac", preset=str(bad))
+
+
+def test_ppo_totals_are_whole_rollouts_and_resume_keeps_the_count(tmp_path: Path, tiny: str) -> None:
+    from armreach_core.rl.train import resolve_config
+
+    assert resolve_config(algo="ppo", preset=tiny, steps=300)["timesteps"] == 320  # 5 rollouts of 64
+    assert resolve_config(algo="ppo", preset="fast")["timesteps"] == 196_608
+    run_dir = tmp_path / "ppo"
+    assert main(["train", "--algo", "ppo", "--preset", tiny, "--steps", "128", "--out", str(run_dir)]) == 0
+    assert main(["train", "--resume", str(run_dir), "--steps", "200"]) == 0
+    assert json.loads((run_dir / "checkpoint.json").read_text())["timesteps"] == 256
+
+
+def test_resume_refuses_flags_that_would_change_the_run(tmp_path: Path, tiny: str, capsys) -> None:
+    run_dir = tmp_path / "run"
+    main(["train", "--algo", "ddpg", "--preset", tiny, "--steps", "100", "--out", str(run_dir)])
+    capsys.readouterr()
+    assert main(["train", "--resume", str(run_dir), "--backend", "mujoco", "--seed", "4"]) == 2
+    err = capsys.readouterr().err
+    assert "--backend, --seed" in err and "config.yaml" in err
+
+
+def test_a_start_that_failed_before_its_first_checkpoint_can_start_again(tmp_path: Path, tiny: str) -> None:
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "config.yaml").write_text("algo: ddpg\n")  # what a crash during model building used to leave
+    (run_dir / "monitor").mkdir()
+    (run_dir / "monitor" / "0.monitor.csv").write_text('#{"t_start": 0}\nr,l,t\n1,2,3\n')
+    assert main(["train", "--algo", "ddpg", "--preset", tiny, "--steps", "100", "--out", str(run_dir)]) == 0
+    assert json.loads((run_dir / "checkpoint.json").read_text())["timesteps"] == 100
+
+
+def test_evaluation_is_the_papers_task_whatever_training_used() -> None:
+    from armreach_core.rl.agents import env_kwargs
+    from armreach_core.rl.train import resolve_config
+
+    config = resolve_config(algo="ppo", preset="fast")
+    assert config["settings"]["env"]["distance_exponent"] == 1.0
+    training = env_kwargs(config)
+    evaluation = env_kwargs(config, evaluation=True)
+    assert training["max_episode_steps"] == 100
+    assert evaluation == {"max_episode_steps": 2048, "joint_limit_mode": "terminate", "task": "reach",
+                          "backend": "pybullet"}  # fmt: skip
+    assert env_kwargs(config, backend="mujoco", evaluation=True)["backend"] == "mujoco"
+
+
+def test_run_files_are_readable_like_any_other_file(tmp_path: Path) -> None:
+    mask = os.umask(0o022)
+    try:
+        runs.atomic_write_text(tmp_path / "a.txt", "x")
+    finally:
+        os.umask(mask)
+    assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o644

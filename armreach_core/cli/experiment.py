@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import shlex
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,15 @@ def add_parser(sub: Any) -> None:
     parser = sub.add_parser("experiment", help="train + evaluate PPO and DDPG over seeds; write report.md")
     parser.add_argument("name", choices=("paper",), help="experiment to run")
     parser.add_argument("--seeds", type=int, default=3, help="seeds per agent (default: 3)")
-    parser.add_argument("--steps", type=int, default=None, help="env steps per run (default: the paper's 614,400)")
+    parser.add_argument(
+        "--steps",
+        type=_steps,
+        action="append",
+        default=None,
+        metavar="N|ALGO=N",
+        help="env steps per run, for both agents or one (repeatable: --steps ppo=614400 --steps ddpg=60000); "
+        "default: the paper's 614,400",
+    )
     parser.add_argument("--episodes", type=int, default=100, help="evaluation episodes per run (default: 100)")
     parser.add_argument("--backend", default="pybullet", help="physics backend (default: pybullet)")
     parser.add_argument("--fast", action="store_true", help="add the `fast` preset's agent")
@@ -22,15 +31,39 @@ def add_parser(sub: Any) -> None:
     parser.set_defaults(run=run)
 
 
+def _steps(text: str) -> tuple[str | None, int]:
+    algo, _, number = text.rpartition("=")
+    if algo and algo not in ("ppo", "ddpg"):
+        raise argparse.ArgumentTypeError(f"{algo!r}: the paper experiment trains ppo and ddpg")
+    try:
+        value = int(number)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not N or ALGO=N") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"steps must be positive, got {value}")
+    return (algo or None, value)
+
+
 def run(args: argparse.Namespace) -> int:
     from armreach_core.rl.experiment import paper_arms, run_experiment
     from armreach_core.rl.report import write_report
 
     out = args.out or runs.default_run_dir("runs", ["experiment", args.name])
-    arms = paper_arms(args.steps, args.fast)
-    results, ik = run_experiment(
-        out, arms, seeds=args.seeds, episodes=args.episodes, backend=args.backend, command=args.command_line
-    )
+    steps: dict[str, int] = {}
+    for algo, n in args.steps or []:
+        steps.update({"ppo": n, "ddpg": n} if algo is None else {algo: n})
+    arms = paper_arms(steps, args.fast)
+    try:
+        results, ik = run_experiment(
+            out, arms, seeds=args.seeds, episodes=args.episodes, backend=args.backend, command=args.command_line
+        )
+    except KeyboardInterrupt:
+        print(
+            f"armreach: interrupted; finished runs and checkpoints are kept in {out}: run the same command with "
+            f"--out {out} to continue",
+            file=sys.stderr,
+        )
+        return 130
     command = shlex.join(args.command_line)
     report = write_report(out, results, ik, episodes=args.episodes, backend=args.backend, command=command)
     for r in results:

@@ -7,8 +7,23 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
 from armreach_core.rl.presets import ALGOS
+
+#: Flags that define a run; with --resume they come from the run's config instead.
+RESUME_CONFLICTS = (
+    ("--algo", "algo", None),
+    ("--preset", "preset", "paper"),
+    ("--task", "task", "reach"),
+    ("--backend", "backend", "pybullet"),
+    ("--her", "her", False),
+    ("--seed", "seed", 0),
+    ("--n-envs", "n_envs", None),
+    ("--urdf", "urdf", None),
+    ("--ee-link", "ee_link", None),
+    ("--out", "out", None),
+)
 
 
 def add_parser(sub: Any) -> None:
@@ -35,13 +50,23 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from armreach_core.rl.train import default_algo, resolve_config, train
+    from armreach_core.rl.train import default_algo, extend, resolve_config, train
 
     if args.resume is not None:
         run_dir: Path = args.resume
+        conflicting = [flag for flag, value, default in RESUME_CONFLICTS if getattr(args, value) != default]
+        if conflicting:
+            raise ConfigError(
+                f"--resume continues {run_dir} with the settings in its config.yaml; drop {', '.join(conflicting)} "
+                "(only --steps, --threads and --device may change)"
+            )
         config = runs.read_config(run_dir)
         if args.steps is not None:
-            config["timesteps"] = int(args.steps)
+            config = extend(config, args.steps)
+        if args.threads is not None:
+            config["settings"]["torch_threads"] = int(args.threads)
+        if args.device != "auto":
+            config["device"] = args.device
         print(f"resuming {run_dir} towards {config['timesteps']} steps")
         result = train(config, run_dir, resume=True, command=args.command_line)
     else:

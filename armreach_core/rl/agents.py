@@ -26,21 +26,22 @@ class Agent(Protocol):
     def act(self, obs: Any, env: ArmEnv) -> npt.NDArray[np.float32]: ...
 
 
-#: Env settings that shape training only; evaluation always uses the task's defaults.
-TRAINING_ONLY = ("max_episode_steps", "distance_exponent")
+#: Env settings evaluation keeps from training: they define what an action means.
+ACTION_SETTINGS = ("max_joint_step", "substeps")
 
 
 def env_kwargs(config: dict[str, Any], *, backend: str | None = None, evaluation: bool = False) -> dict[str, Any]:
     """ArmEnv keyword arguments for a run config.
 
-    ``evaluation`` gives the paper's task: the 2048-step limit (``eval_max_episode_steps``)
-    and the paper's reward, whatever episode length and reward shaping training used.
+    ``evaluation`` gives the paper's task whatever training used: the 2048-step limit
+    (``eval_max_episode_steps``), joint-limit violations ending the episode, the 5 cm
+    success radius and the paper's reward; only the action's meaning is kept.
     """
     kwargs: dict[str, Any] = dict(config.get("settings", {}).get("env", {}))
     if evaluation:
-        for key in TRAINING_ONLY:
-            kwargs.pop(key, None)
+        kwargs = {k: v for k, v in kwargs.items() if k in ACTION_SETTINGS}
         kwargs["max_episode_steps"] = int(config.get("eval_max_episode_steps", 2048))
+        kwargs["joint_limit_mode"] = "terminate"
     kwargs.update(task=config["task"], backend=backend or config["backend"])
     if config.get("urdf"):
         kwargs["urdf"] = config["urdf"]
@@ -52,7 +53,10 @@ def env_kwargs(config: dict[str, Any], *, backend: str | None = None, evaluation
 
 
 def make_vec_env(config: dict[str, Any], run_dir: Path, seed: int, n_envs: int, *, append: bool) -> Any:
-    """``n_envs`` Monitor-wrapped envs in one process, logging episodes to ``run_dir/monitor/``."""
+    """``n_envs`` Monitor-wrapped envs in one process, logging episodes to ``run_dir/monitor/``.
+
+    Env ``i`` is seeded ``seed + i`` at its first reset (SB3's ``VecEnv.seed``).
+    """
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -62,10 +66,8 @@ def make_vec_env(config: dict[str, Any], run_dir: Path, seed: int, n_envs: int, 
 
     def factory(i: int) -> Any:
         def make() -> Any:
-            env = ArmEnv(**kwargs)
-            env.reset(seed=seed + 1000 * i)
             return Monitor(
-                env,
+                ArmEnv(**kwargs),
                 str(monitor_dir / str(i)),
                 info_keywords=("is_success", "distance"),
                 override_existing=not append,
@@ -149,8 +151,12 @@ def is_off_policy(algo: str) -> bool:
 class SB3Agent:
     """A trained SB3 model acting deterministically."""
 
-    def __init__(self, model: Any) -> None:
+    def __init__(self, model: Any, path: Path | None = None) -> None:
         self.model = model
+        self.path = path
+
+    def describe(self) -> str:
+        return f"{self.path.name if self.path else 'model'} after {int(self.model.num_timesteps)} steps"
 
     def act(self, obs: Any, env: ArmEnv) -> npt.NDArray[np.float32]:
         action, _ = self.model.predict(obs, deterministic=True)
@@ -163,6 +169,9 @@ class IKAgent:
     def __init__(self, damping: float = 0.05) -> None:
         self.damping = damping
         self._policy: IKPolicy | None = None
+
+    def describe(self) -> str:
+        return f"damped-least-squares IK (damping {self.damping})"
 
     def act(self, obs: Any, env: ArmEnv) -> npt.NDArray[np.float32]:
         if self._policy is None or self._policy.robot is not env.robot:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -48,6 +49,7 @@ class Evaluation:
     control_dt: float
     jerk_trace: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     seconds: float = 0.0
+    source: str = ""
 
     def summary(self) -> dict[str, Any]:
         successes = [e.success for e in self.episodes]
@@ -67,6 +69,7 @@ class Evaluation:
             "final_distance_mean": float(np.mean([e.final_distance for e in self.episodes])),
             "control_dt": self.control_dt,
             "seconds": self.seconds,
+            "controller": self.source,
         }
 
 
@@ -128,23 +131,33 @@ def _average_trace(traces: list[npt.NDArray[np.float64]]) -> npt.NDArray[np.floa
     return np.asarray(total / np.maximum(count, 1), dtype=np.float64)
 
 
-def load_agent(run_dir: Path, config: dict[str, Any]) -> Agent:
-    """The run's controller: its trained model, or the IK reference."""
+def load_agent(run_dir: Path, config: dict[str, Any], backend: str | None = None) -> Agent:
+    """The run's controller: its final model (else its latest checkpoint), or the IK reference."""
     if config["algo"] == "ik":
         return IKAgent(float(config["settings"].get("damping", 0.05)))
-    for name in (runs.MODEL, runs.CHECKPOINT):
-        path = run_dir / name
+    model_path, checkpoint = run_dir / runs.MODEL, run_dir / runs.CHECKPOINT
+    if model_path.is_file() and checkpoint.is_file() and checkpoint.stat().st_mtime > model_path.stat().st_mtime + 1:
+        warnings.warn(
+            f"{checkpoint} is newer than {model_path} (a resumed run was interrupted); evaluating {runs.MODEL}",
+            RunWarning,
+            stacklevel=2,
+        )
+    for path in (model_path, checkpoint):
         if path.is_file():
             # HER models need an env with the goal spaces to load; a policy needs nothing else.
-            env = ArmEnv(**env_kwargs(config)) if "her" in config["settings"] else None
+            env = ArmEnv(**env_kwargs(config, backend=backend)) if "her" in config["settings"] else None
             try:
-                return SB3Agent(algo_class(config["algo"]).load(path, env=env, device="cpu"))
+                return SB3Agent(algo_class(config["algo"]).load(path, env=env, device="cpu"), path)
             except Exception as exc:
                 raise ConfigError(f"cannot load {path}: {exc}; the file is damaged or not an SB3 model") from exc
             finally:
                 if env is not None:
                     env.close()
     raise ConfigError(f"{run_dir} has no {runs.MODEL} or {runs.CHECKPOINT}; train it first")
+
+
+class RunWarning(UserWarning):
+    """Something about a run folder the user should know before trusting a number."""
 
 
 def evaluate_run(
@@ -159,9 +172,11 @@ def evaluate_run(
     config = runs.read_config(run_dir)
     if max_episode_steps is not None:
         config["eval_max_episode_steps"] = max_episode_steps
-    agent = load_agent(run_dir, config)
+    agent = load_agent(run_dir, config, backend)
     kwargs = env_kwargs(config, backend=backend, evaluation=True)
-    return run_episodes(lambda: ArmEnv(**kwargs), agent, episodes, seed)
+    evaluation = run_episodes(lambda: ArmEnv(**kwargs), agent, episodes, seed)
+    evaluation.source = agent.describe() if isinstance(agent, (SB3Agent, IKAgent)) else ""
+    return evaluation
 
 
 def save_evaluation(evaluation: Evaluation, out: Path) -> dict[str, Any]:

@@ -21,7 +21,14 @@ from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
 from armreach_core.rl.evaluate import Evaluation, evaluate_run, save_evaluation
 from armreach_core.rl.metrics import MeanStd, convergence_episode, moving_average
-from armreach_core.rl.train import default_algo, read_progress, resolve_config, train
+from armreach_core.rl.train import (
+    config_mismatch,
+    default_algo,
+    extend,
+    read_progress,
+    resolve_config,
+    train,
+)
 
 #: The paper's numbers (Tables 2-4): PPO and DDPG, 614,400 steps, 100 evaluation episodes.
 PAPER = {
@@ -52,6 +59,7 @@ class ArmResult:
     run_dirs: list[Path] = field(default_factory=list)
     train_seconds: list[float] = field(default_factory=list)
     timesteps: list[int] = field(default_factory=list)
+    control_dt: float = 1.0 / 24.0
 
     def convergence(self) -> MeanStd:
         values = [convergence_episode(r, REWARD_WINDOW) for r in self.episode_rewards]
@@ -67,8 +75,13 @@ class ArmResult:
         return MeanStd.of([s[key] * scale for s in self.summaries])
 
 
-def paper_arms(steps: int | None, fast: bool) -> list[Arm]:
-    arms = [Arm("PPO", "ppo", "paper", steps=steps), Arm("DDPG", "ddpg", "paper", steps=steps)]
+def paper_arms(steps: int | dict[str, int] | None, fast: bool) -> list[Arm]:
+    """PPO and DDPG with the paper preset (``steps``: one total, or per algorithm), plus the fast agent."""
+    per_algo = steps if isinstance(steps, dict) else {"ppo": steps, "ddpg": steps}
+    arms = [
+        Arm("PPO", "ppo", "paper", steps=per_algo.get("ppo")),
+        Arm("DDPG", "ddpg", "paper", steps=per_algo.get("ddpg")),
+    ]
     if fast:
         algo = default_algo("fast")
         arms.append(Arm(f"{algo.upper()} (fast preset)", algo, "fast"))
@@ -88,6 +101,34 @@ def episode_rewards(run_dir: Path) -> npt.NDArray[np.float64]:
         rows += [((j + 0.5) / len(records), float(record["r"])) for j, record in enumerate(records)]
     rows.sort(key=lambda row: row[0])
     return np.asarray([r for _, r in rows], dtype=np.float64)
+
+
+def _plan(run_dir: Path, config: dict[str, Any]) -> tuple[dict[str, Any], str]:
+    """What to do with an experiment's run folder: train, resume, extend or reuse it.
+
+    A folder is reused only when its settings are the ones asked for; a shorter run with
+    otherwise equal settings is extended; anything else is an error rather than a table
+    that silently mixes different runs.
+    """
+    if not (run_dir / runs.CONFIG).is_file() or not (
+        (run_dir / runs.CHECKPOINT).is_file() or (run_dir / runs.MODEL).is_file()
+    ):
+        return config, "training"
+    stored = runs.read_config(run_dir)
+    differences = config_mismatch(stored, config)
+    only_longer = differences == [d for d in differences if d.startswith("timesteps:")] and int(
+        stored["timesteps"]
+    ) < int(config["timesteps"])
+    if differences and not only_longer:
+        raise ConfigError(
+            f"{run_dir} holds a run with other settings ({'; '.join(differences)}); "
+            "choose another --out, or delete that folder to train it again"
+        )
+    if only_longer:
+        return extend(stored, int(config["timesteps"])), "extending"
+    if (run_dir / runs.MODEL).is_file():
+        return stored, "reusing"
+    return stored, "resuming"
 
 
 def training_seconds(run_dir: Path, fallback: float) -> float:
@@ -121,6 +162,8 @@ def run_experiment(
     """Train and evaluate every arm for every seed (reusing finished runs), then the IK reference."""
     if seeds < 1:
         raise ConfigError(f"--seeds must be >= 1, got {seeds}")
+    if episodes < 1:
+        raise ConfigError(f"--episodes must be >= 1, got {episodes}")
     out.mkdir(parents=True, exist_ok=True)
     results = []
     for arm in arms:
@@ -137,14 +180,12 @@ def run_experiment(
             )
             run_dir = out / f"{arm.algo}{'-her' if arm.her else ''}-{config['preset']}-s{seed}"
             t0 = time.perf_counter()
-            if not (run_dir / runs.MODEL).is_file():
-                resume = (run_dir / runs.CHECKPOINT).is_file()
-                _log(stream, f"{'resuming' if resume else 'training'} {arm.label}, seed {seed}: {run_dir}")
-                trained = train(config, run_dir, resume=resume, stream=stream, command=command)
+            config, action = _plan(run_dir, config)
+            _log(stream, f"{action} {arm.label}, seed {seed}: {run_dir}")
+            if action != "reusing":
+                trained = train(config, run_dir, resume=action != "training", stream=stream, command=command)
                 if trained.interrupted:
                     raise KeyboardInterrupt
-            else:
-                _log(stream, f"reusing {run_dir}")
             result.train_seconds.append(training_seconds(run_dir, time.perf_counter() - t0))
             evaluation = evaluate_run(run_dir, episodes=episodes, backend=backend)
             summary = save_evaluation(evaluation, run_dir / f"eval-{backend}")
@@ -154,15 +195,14 @@ def run_experiment(
             result.episode_rewards.append(episode_rewards(run_dir))
             result.summaries.append(summary)
             result.jerk_traces.append(evaluation.jerk_trace)
+            result.control_dt = evaluation.control_dt
             result.timesteps.append(int(runs.read_config(run_dir)["timesteps"]))
         results.append(result)
-    ik_dir = out / "ik"
-    if not (ik_dir / runs.CONFIG).is_file():
-        runs.new_run_dir(ik_dir)
-        ik_config = resolve_config(
-            algo="ik", preset="paper", backend=backend, eval_max_episode_steps=eval_max_episode_steps
-        )
-        runs.write_yaml(ik_dir / runs.CONFIG, ik_config)
+    ik_dir = runs.new_run_dir(out / "ik")  # nothing to train: always written afresh
+    ik_config = resolve_config(
+        algo="ik", preset="paper", backend=backend, eval_max_episode_steps=eval_max_episode_steps
+    )
+    runs.write_yaml(ik_dir / runs.CONFIG, ik_config)
     ik = evaluate_run(ik_dir, episodes=episodes, backend=backend)
     save_evaluation(ik, ik_dir / f"eval-{backend}")
     return results, ik

@@ -79,7 +79,7 @@ def convergence_episode(
 
 @dataclass(frozen=True)
 class MeanStd:
-    """Mean and (population) standard deviation, with the sample count; NaN when empty."""
+    """Mean and sample standard deviation (ddof 1; 0 for a single value), with the count; NaN when empty."""
 
     mean: float
     std: float
@@ -91,7 +91,7 @@ class MeanStd:
         arr = arr[np.isfinite(arr)]
         if arr.size == 0:
             return cls(float("nan"), float("nan"), 0)
-        return cls(float(arr.mean()), float(arr.std()), int(arr.size))
+        return cls(float(arr.mean()), float(arr.std(ddof=1)) if arr.size > 1 else 0.0, int(arr.size))
 
     def fmt(self, digits: int = 2) -> str:
         if self.n == 0:

@@ -37,23 +37,24 @@ def write_report(
     figures = write_figures(out, results, ik)
     ik_summary = ik.summary()
     seeds = max((len(r.seeds) for r in results), default=0)
+    limit = _eval_limit(out)
+    rate = round(1.0 / ik.control_dt)
     lines = [
         "# Reach experiment: the paper's Tables 2-4 beside ours",
         "",
         f"Command: `{command}`",
         "",
         f"Backend {backend}; {seeds} seed(s) per agent, mean ± std over seeds; {episodes} evaluation episodes "
-        "per seed (5 cm success radius, 2048-step limit, episode `i` seeded `10000 + i` for every agent). "
+        f"per seed (the paper's task: 5 cm success radius, {limit}-step limit, joint-limit violations end the "
+        "episode, reward −d³ + 10; episode `i` seeded `10000 + i` for every agent). "
         f"Machine: {platform.machine()}, {platform.python_version()}, {_cpu_count()} CPU cores.",
         "",
-        "| agent | preset | env steps per seed | training wall-clock per seed |",
+        "| agent | preset | env steps per seed | training wall-clock per seed (mean) |",
         "|---|---|---|---|",
     ]
     for r in results:
-        steps = r.timesteps[0] if r.timesteps else 0
-        lines.append(
-            f"| {r.arm.label} | {r.arm.preset} | {steps:,} | {MeanStd.of(r.train_seconds).mean / 60:.1f} min |"
-        )
+        steps = ", ".join(f"{n:,}" for n in sorted(set(r.timesteps))) or "0"
+        lines.append(f"| {r.arm.label} | {r.arm.preset} | {steps} | {MeanStd.of(r.train_seconds).mean / 60:.1f} min |")
     lines += [
         "",
         "The paper trained 614,400 steps (300 episodes of 2048 steps). Runs shorter than that are not the paper's "
@@ -63,7 +64,8 @@ def write_report(
         "",
         f"Convergence episode: the first training episode from which the {REWARD_WINDOW}-episode moving-average "
         "reward stays within ±5 % of its final value for 100 episodes ('not reached' when no run got there). "
-        f"Final average reward: the last value of that moving average.",
+        "Final average reward: the last value of that moving average. † marks agents whose preset trains with "
+        "another reward or episode length than the paper's (see its preset), so that column is not comparable.",
         "",
         "| agent | convergence episode (paper) | convergence episode (ours) | final avg. reward (paper) "
         "| final avg. reward (ours) |",
@@ -74,7 +76,7 @@ def write_report(
         conv_text = "not reached" if conv.n == 0 else f"{conv.fmt(0)} ({r.converged_runs()}/{len(r.seeds)} runs)"
         lines.append(
             f"| {r.arm.label} | {_paper(r.arm.label, 'convergence')} | {conv_text} | "
-            f"{_paper(r.arm.label, 'final_reward')} | {r.final_reward().fmt(2)} |"
+            f"{_paper(r.arm.label, 'final_reward')} | {r.final_reward().fmt(2)}{_dagger(r)} |"
         )
     lines += [
         "",
@@ -96,7 +98,7 @@ def write_report(
         "",
         "## Table 4: success, reward and smoothness",
         "",
-        "Jerk: third finite difference of the joint angles at the control rate (24 Hz), per-joint RMS, averaged "
+        f"Jerk: third finite difference of the joint angles at the control rate ({rate} Hz), per-joint RMS, averaged "
         "over each successful episode, then over episodes and seeds (rad/s³).",
         "",
         "| agent | success % (paper / ours) | final reward (paper / ours) | jerk rad/s³ (paper / ours) "
@@ -106,7 +108,7 @@ def write_report(
     for r in results:
         lines.append(
             f"| {r.arm.label} | {_paper(r.arm.label, 'success')} / {_pct(r.stat('success_rate', 100.0))} | "
-            f"{_paper(r.arm.label, 'final_reward')} / {r.final_reward().fmt(2)} | "
+            f"{_paper(r.arm.label, 'final_reward')} / {r.final_reward().fmt(2)}{_dagger(r)} | "
             f"{_paper(r.arm.label, 'jerk')} / {_jerk(r)} | {r.stat('final_reward_mean').fmt(2)} |"
         )
     lines.append(
@@ -125,6 +127,15 @@ def write_report(
     path = out / "report.md"
     runs.atomic_write_text(path, "\n".join(lines) + "\n")
     return path
+
+
+def _dagger(r: ArmResult) -> str:
+    return "" if r.arm.preset == "paper" else " †"
+
+
+def _eval_limit(out: Path) -> int:
+    config = runs.read_config(out / "ik")
+    return int(config.get("eval_max_episode_steps", 2048))
 
 
 def _stg(r: ArmResult) -> str:
@@ -179,7 +190,7 @@ def write_figures(out: Path, results: list[ArmResult], ik: Evaluation) -> list[t
             padded = np.full((len(usable), n), np.nan)
             for i, t in enumerate(usable):
                 padded[i, : t.size] = t
-            traces.append((r.arm.label, np.nanmean(padded, axis=0), ik.control_dt))
+            traces.append((r.arm.label, np.nanmean(padded, axis=0), r.control_dt))
     if ik.jerk_trace.size:
         traces.append(("DLS IK (reference)", ik.jerk_trace, ik.control_dt))
     for label, trace, dt in traces:

@@ -24,6 +24,7 @@ import json
 import os
 import platform
 import shlex
+import shutil
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from importlib import metadata
@@ -56,6 +57,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     final.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent)
     os.close(fd)
+    os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; results should be as readable as any file
     tmp_path = Path(tmp)
     try:
         yield tmp_path
@@ -64,6 +66,12 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
         os.replace(tmp_path, final)
     finally:
         tmp_path.unlink(missing_ok=True)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
@@ -145,13 +153,40 @@ def default_run_dir(root: str | os.PathLike[str], parts: Sequence[str]) -> Path:
 
 
 def new_run_dir(path: Path) -> Path:
-    """Create ``path``; refuse to reuse a folder that already holds a run."""
+    """Create ``path`` for a new run; refuse a folder that holds a run with something to resume.
+
+    A folder with a config but neither checkpoint nor model (a start that failed before
+    its first checkpoint) is started over.
+    """
     if (path / CONFIG).exists():
-        raise ConfigError(
-            f"{path} already holds a run; continue it with `armreach train --resume {path}` or choose another --out"
-        )
+        if (path / CHECKPOINT).exists() or (path / MODEL).exists():
+            raise ConfigError(
+                f"{path} already holds a run; continue it with `armreach train --resume {path}` or choose another --out"
+            )
+        for stale in ("monitor", "tb"):
+            shutil.rmtree(path / stale, ignore_errors=True)
+        for name in (CONFIG, PROGRESS, REPLAY):
+            (path / name).unlink(missing_ok=True)
     path.mkdir(parents=True, exist_ok=True)
     return path
+
+
+def monitor_rows(run_dir: Path) -> dict[str, int]:
+    """Episodes recorded so far in each monitor log (file name → rows)."""
+    out: dict[str, int] = {}
+    for path in sorted((run_dir / "monitor").glob("*.monitor.csv")):
+        with open(path, "rb") as handle:
+            out[path.name] = max(sum(1 for _ in handle) - 2, 0)
+    return out
+
+
+def truncate_monitors(run_dir: Path, rows: dict[str, int]) -> None:
+    """Cut each monitor log back to ``rows`` episodes (those the checkpoint includes)."""
+    for path in sorted((run_dir / "monitor").glob("*.monitor.csv")):
+        keep = rows.get(path.name, 0)
+        lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+        if len(lines) > keep + 2:
+            atomic_write_text(path, "".join(lines[: keep + 2]))
 
 
 def write_json(path: str | os.PathLike[str], data: Any) -> None:

@@ -60,20 +60,44 @@ def resolve_config(
     eval_max_episode_steps: int = 2048,
     threads: int | None = None,
 ) -> dict[str, Any]:
-    """The full, explicit config of a new run (what ``config.yaml`` records)."""
+    """The full, explicit config of a new run (what ``config.yaml`` records).
+
+    Checked here, before anything is written: seed, env count, thread count, HER's
+    needs. PPO's total is rounded up to whole rollouts (``n_steps × n_envs``), which is
+    what SB3 trains, so the recorded count is the true one.
+    """
     loaded = load_preset(preset)
     settings = loaded.get(task, algo)
+    if not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f"--seed must be a non-negative integer, got {seed!r}")
     if threads is not None:
         if threads < 1:
             raise ConfigError(f"--threads must be >= 1, got {threads}")
         settings["torch_threads"] = int(threads)
+    envs = int(n_envs if n_envs is not None else settings.get("n_envs", 1))
+    if not 1 <= envs <= 64:
+        raise ConfigError(f"--n-envs must be between 1 and 64, got {envs}")
     if her:
         if algo not in ("ddpg", "td3", "sac"):
             raise ConfigError(f"--her needs an off-policy algorithm (ddpg, td3, sac), not {algo!r}")
         settings.setdefault("her", {"n_sampled_goal": 4, "goal_selection_strategy": "future"})
+    if "her" in settings:
+        # HER samples whole episodes: learning must wait for the first one to end.
+        episode = int(settings.get("env", {}).get("max_episode_steps", 2048))
+        starts = settings.setdefault("learning_starts", episode)
+        if starts < episode:
+            raise ConfigError(
+                f"with HER, learning_starts ({starts}) must be at least the training episode length ({episode}): "
+                "HER cannot sample before the first episode ends"
+            )
     total = int(steps if steps is not None else settings.get("timesteps", 100_000))
     if total < 1 and algo != "ik":
         raise ConfigError(f"--steps must be positive, got {total}")
+    if algo == "ppo":
+        rollout = int(settings.get("n_steps", 2048)) * envs
+        total = -(-total // rollout) * rollout
+    if eval_max_episode_steps < 1:
+        raise ConfigError(f"the evaluation episode limit must be positive, got {eval_max_episode_steps}")
     return {
         "algo": algo,
         "task": task,
@@ -82,7 +106,7 @@ def resolve_config(
         "preset_source": loaded.source,
         "seed": int(seed),
         "timesteps": total,
-        "n_envs": int(n_envs if n_envs is not None else settings.get("n_envs", 1)),
+        "n_envs": envs,
         "urdf": str(Path(urdf).expanduser().resolve()) if urdf else None,
         "ee_link": ee_link,
         "device": device,
@@ -91,13 +115,55 @@ def resolve_config(
     }
 
 
+def extend(config: dict[str, Any], steps: int) -> dict[str, Any]:
+    """``config`` with a new total (``--resume --steps``), rounded up to whole PPO rollouts."""
+    if steps < 1:
+        raise ConfigError(f"--steps must be positive, got {steps}")
+    total = int(steps)
+    if config["algo"] == "ppo":
+        rollout = int(config["settings"].get("n_steps", 2048)) * int(config["n_envs"])
+        total = -(-total // rollout) * rollout
+    return {**config, "timesteps": total}
+
+
+#: Settings that change how fast a run goes, not what it learns.
+RUNTIME_ONLY = ("torch_threads", "checkpoint_every")
+
+
+def config_mismatch(stored: dict[str, Any], wanted: dict[str, Any]) -> list[str]:
+    """What differs between two run configs, ignoring runtime-only settings and paths of presets."""
+
+    def strip(config: dict[str, Any]) -> dict[str, Any]:
+        settings = {k: v for k, v in config.get("settings", {}).items() if k not in RUNTIME_ONLY}
+        keep = ("algo", "task", "backend", "seed", "timesteps", "n_envs", "urdf", "ee_link", "eval_max_episode_steps")
+        return {**{k: config.get(k) for k in keep}, "settings": settings}
+
+    a, b = strip(stored), strip(wanted)
+    out = [f"{k}: {a[k]!r} here, {b[k]!r} asked" for k in a if k != "settings" and a[k] != b[k]]
+    sa, sb = a["settings"], b["settings"]
+    for k in sorted(set(sa) | set(sb)):
+        if k != "timesteps" and sa.get(k) != sb.get(k):
+            out.append(f"{k}: {sa.get(k)!r} here, {sb.get(k)!r} asked")
+    return out
+
+
 class _Stop:
-    """Turns SIGINT/SIGTERM into a polite stop request (a second Ctrl-C interrupts at once)."""
+    """Turns SIGINT/SIGTERM into a polite stop request at the next step.
+
+    While the final checkpoint is written, further signals are held back so that the
+    files stay consistent; they are re-delivered as KeyboardInterrupt afterwards.
+    """
 
     def __init__(self) -> None:
         self.requested = False
+        self.saving = False
+        self.pending = False
 
     def handler(self, signum: int, frame: FrameType | None) -> None:
+        if self.saving:
+            self.pending = True
+            print("\nstill saving the checkpoint; it will stop right after", file=sys.stderr)
+            return
         if self.requested:
             raise KeyboardInterrupt
         self.requested = True
@@ -113,14 +179,26 @@ class _Stop:
         finally:
             for s, h in previous.items():
                 signal.signal(s, h)
+        if self.pending:
+            raise KeyboardInterrupt
+
+    @contextlib.contextmanager
+    def protect(self) -> Iterator[None]:
+        self.saving = True
+        try:
+            yield
+        finally:
+            self.saving = False
 
 
 def _make_callback(
-    run_dir: Path, total: int, every: int, stop: _Stop, stream: TextIO | None, base_seconds: float
+    run_dir: Path, total: int, every: int, stop: _Stop, stream: TextIO | None, base_seconds: float, on_policy: bool
 ) -> Any:
     from stable_baselines3.common.callbacks import BaseCallback
 
     class Callback(BaseCallback):
+        """Progress line, periodic checkpoints at points where model and data agree, polite stop."""
+
         def __init__(self) -> None:
             super().__init__()
             self.last_save = 0
@@ -128,23 +206,44 @@ def _make_callback(
             self.t0 = time.perf_counter()
             self.start_steps = 0
             self.successes: list[float] = []
+            self.trained_steps = 0  # on-policy: steps whose rollout has been trained on
+            self.trained_rows: dict[str, int] = {}
+
+        def seconds(self) -> float:
+            return base_seconds + time.perf_counter() - self.t0
 
         def _on_training_start(self) -> None:
-            self.start_steps = self.last_save = int(self.model.num_timesteps)
+            self.start_steps = self.last_save = self.trained_steps = int(self.model.num_timesteps)
+            self.trained_rows = runs.monitor_rows(run_dir)
             self.t0 = self.last_print = time.perf_counter()
 
-        def _on_step(self) -> bool:
+        def _on_rollout_start(self) -> None:
+            # On-policy: the previous rollout has just been trained on.
+            if on_policy:
+                self.trained_steps = int(self.model.num_timesteps)
+                self.trained_rows = runs.monitor_rows(run_dir)
+                self._maybe_save()
+
+        def _on_rollout_end(self) -> None:
+            # Off-policy: this rollout's transitions are in the replay buffer now.
+            if not on_policy:
+                self._maybe_save()
+
+        def _maybe_save(self) -> None:
             steps = int(self.model.num_timesteps)
+            if steps - self.last_save >= every:
+                with stop.protect():
+                    save_checkpoint(self.model, run_dir, self.seconds())
+                self.last_save = steps
+
+        def _on_step(self) -> bool:
             for info in self.locals.get("infos", []):
                 if "episode" in info:
                     self.successes = (self.successes + [float(info.get("is_success", False))])[-100:]
-            if steps - self.last_save >= every:
-                save_checkpoint(self.model, run_dir, base_seconds + time.perf_counter() - self.t0)
-                self.last_save = steps
             now = time.perf_counter()
             if stream is not None and now - self.last_print > (2.0 if stream.isatty() else 30.0):
                 self.last_print = now
-                self.report(steps, now)
+                self.report(int(self.model.num_timesteps), now)
             return not stop.requested
 
         def _on_training_end(self) -> None:
@@ -168,22 +267,33 @@ def _make_callback(
     return Callback()
 
 
-def save_checkpoint(model: Any, run_dir: Path, train_seconds: float) -> None:
-    """Model, then replay buffer, then the step count and training time; each file replaced atomically."""
+def save_checkpoint(model: Any, run_dir: Path, train_seconds: float, rows: dict[str, int] | None = None) -> None:
+    """Replay buffer, then model, then ``checkpoint.json``; each file replaced atomically.
+
+    ``checkpoint.json`` is written last and records the step count, the training time
+    and how many rows each monitor log had, so a resume cuts the logs back to match.
+    The model file carries its own step count, which resume trusts.
+    """
     if hasattr(model, "replay_buffer") and model.replay_buffer is not None:
         runs.atomic_save(run_dir / runs.REPLAY, model.save_replay_buffer)
     runs.atomic_save(run_dir / runs.CHECKPOINT, model.save)
-    runs.write_json(
-        run_dir / runs.PROGRESS, {"timesteps": int(model.num_timesteps), "train_seconds": round(train_seconds, 2)}
-    )
+    record = {
+        "timesteps": int(model.num_timesteps),
+        "train_seconds": round(train_seconds, 2),
+        "monitor_rows": runs.monitor_rows(run_dir) if rows is None else rows,
+    }
+    runs.write_json(run_dir / runs.PROGRESS, record)
 
 
 def read_progress(run_dir: Path) -> dict[str, Any]:
-    """``{"timesteps", "train_seconds"}`` of the last checkpoint (zeros when there is none)."""
+    """``{"timesteps", "train_seconds", "monitor_rows"}`` of the last checkpoint (zeros when there is none)."""
     path = run_dir / runs.PROGRESS
     if not path.is_file():
-        return {"timesteps": 0, "train_seconds": 0.0}
-    data: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+        return {"timesteps": 0, "train_seconds": 0.0, "monitor_rows": {}}
+    try:
+        data: dict[str, Any] = json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise ConfigError(f"{path} is damaged ({exc}); delete it to resume from {runs.CHECKPOINT} alone") from None
     return data
 
 
@@ -203,7 +313,18 @@ def _load_checkpoint(config: dict[str, Any], run_dir: Path, env: Any) -> Any:
                 model.load_replay_buffer(replay, truncate_last_traj=True)
             except Exception as exc:
                 raise ConfigError(f"cannot load {replay}: {exc}; delete it to resume with an empty buffer") from exc
+    # Fresh episodes from new seeds: the saved observation belongs to envs that no longer
+    # exist, and reusing the run's seed would replay its first targets and noise.
+    model._last_obs = None
+    model.set_random_seed(_seed_base(int(config["seed"])) + int(model.num_timesteps))
     return model
+
+
+def _seed_base(seed: int) -> int:
+    """A well-spread 31-bit seed for run seed ``seed``; env ``i`` of the run gets ``base + i``."""
+    import numpy as np
+
+    return int(np.random.SeedSequence([seed, 0xA12E]).generate_state(1)[0] >> 1)
 
 
 def train(
@@ -220,45 +341,55 @@ def train(
     algo = config["algo"]
     if algo not in RL_ALGOS:
         raise ConfigError(f"{algo!r} is not trained; use one of {list(RL_ALGOS)}")
-    if not resume:
-        runs.new_run_dir(run_dir)
-        runs.write_yaml(run_dir / runs.CONFIG, config)
+    if resume:
+        progress = read_progress(run_dir)
+        if not (run_dir / runs.CHECKPOINT).is_file():
+            raise ConfigError(f"{run_dir} has no {runs.CHECKPOINT} to resume from; start it again without --resume")
+        runs.truncate_monitors(run_dir, progress.get("monitor_rows", {}))
     else:
-        runs.write_yaml(run_dir / runs.CONFIG, config)  # --steps may have extended the total
-    runs.record_command(run_dir, command or ["python:", "armreach_core.rl.train.train", str(run_dir)])
-    runs.write_json(run_dir / runs.ENVIRONMENT, runs.environment_record())
+        runs.new_run_dir(run_dir)
     settings = config["settings"]
     threads = int(settings.get("torch_threads", 0))
     if threads > 0:
         torch.set_num_threads(threads)
-
-    env = make_vec_env(config, run_dir, int(config["seed"]), int(config["n_envs"]), append=resume)
+    env = make_vec_env(config, run_dir, _seed_base(int(config["seed"])), int(config["n_envs"]), append=resume)
     try:
         if resume:
             model = _load_checkpoint(config, run_dir, env)
             model.tensorboard_log = str(run_dir / "tb")
         else:
             model = build_model(algo, settings, env, int(config["seed"]), run_dir / "tb", config.get("device", "auto"))
+        # Written once the model exists, so that a folder with a config always has something to resume
+        # or is safe to start over (see runs.new_run_dir).
+        runs.write_yaml(run_dir / runs.CONFIG, config)
+        runs.record_command(run_dir, command or ["python:", "armreach_core.rl.train.train", str(run_dir)])
+        runs.write_json(run_dir / runs.ENVIRONMENT, runs.environment_record())
         base_seconds = float(read_progress(run_dir).get("train_seconds", 0.0)) if resume else 0.0
         total = int(config["timesteps"])
         remaining = total - int(model.num_timesteps)
         stop = _Stop()
         t0 = time.perf_counter()
-        if remaining > 0:
-            callback = _make_callback(
-                run_dir,
-                total,
-                int(settings.get("checkpoint_every", DEFAULT_CHECKPOINT_EVERY)),
-                stop,
-                stream,
-                base_seconds,
-            )
-            with stop.installed(), warnings.catch_warnings():
-                warnings.filterwarnings("ignore", message=".*mini-batch size.*", category=UserWarning)
-                model.learn(remaining, callback=callback, reset_num_timesteps=False, tb_log_name=algo)
-        save_checkpoint(model, run_dir, base_seconds + time.perf_counter() - t0)
-        if not stop.requested:
-            runs.atomic_save(run_dir / runs.MODEL, model.save)
+        on_policy = not is_off_policy(algo)
+        with stop.installed():
+            rows: dict[str, int] | None = None
+            if remaining > 0:
+                every = int(settings.get("checkpoint_every", DEFAULT_CHECKPOINT_EVERY))
+                callback = _make_callback(run_dir, total, every, stop, stream, base_seconds, on_policy)
+                with warnings.catch_warnings():
+                    warnings.filterwarnings("ignore", message=".*mini-batch size.*", category=UserWarning)
+                    model.learn(remaining, callback=callback, reset_num_timesteps=False, tb_log_name=algo)
+                if stop.requested:
+                    # Count only what the checkpoint keeps: PPO drops its unfinished rollout, and an
+                    # off-policy stop happens before the last step's transition is stored.
+                    if on_policy:
+                        model.num_timesteps = callback.trained_steps
+                        rows = callback.trained_rows
+                    else:
+                        model.num_timesteps -= int(config["n_envs"])
+            with stop.protect():
+                save_checkpoint(model, run_dir, base_seconds + time.perf_counter() - t0, rows)
+                if not stop.requested:
+                    runs.atomic_save(run_dir / runs.MODEL, model.save)
         return TrainResult(run_dir, int(model.num_timesteps), total, stop.requested, time.perf_counter() - t0)
     finally:
         env.close()
