@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install test test-no-mujoco test-all lint demo clean
+.PHONY: install test test-no-mujoco test-all lint demo bench clean
 
 $(STAMP): pyproject.toml backends/pybullet/pyproject.toml backends/mujoco/pyproject.toml constraints-cpu.txt
 	$(PYTHON) -m venv $(VENV)
@@ -30,6 +30,9 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
+
+bench: $(STAMP)
+	$(BIN)/armreach bench --out runs/bench
 
 demo: $(STAMP)
 	$(BIN)/armreach experiment paper --seeds 1 --steps 10000 --episodes 20 --fast --out runs/demo

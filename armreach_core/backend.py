@@ -78,7 +78,7 @@ class ArmState:
     ee_pos: FloatArray
 
     def is_finite(self) -> bool:
-        return bool(np.all(np.isfinite(self.q)) and np.all(np.isfinite(self.qd)) and np.all(np.isfinite(self.ee_pos)))
+        return bool(np.isfinite(np.concatenate((self.q, self.qd, self.ee_pos))).all())
 
 
 class Backend(ABC):
@@ -126,6 +126,16 @@ class Backend(ABC):
     @abstractmethod
     def close(self) -> None:
         """Release the engine. Safe to call more than once."""
+
+    def bare_loop(self, deltas: FloatArray) -> None:
+        """The engine work of ``len(deltas)`` env steps, written directly against the engine.
+
+        For each row: target = clip(q + delta) into the joint limits, set the position
+        targets, run ``physics.substeps`` physics steps, read joint positions, velocities and
+        the end effector. This is the floor an env step is measured against (``armreach
+        bench``); backends that cannot provide it raise NotImplementedError.
+        """
+        raise NotImplementedError(f"backend {self.name!r} has no bare loop for benchmarks")
 
     def read_state(self) -> ArmState:
         """Joint state and end-effector position in one call (backends may batch the reads)."""

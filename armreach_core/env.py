@@ -189,9 +189,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
                 f"action has shape {arr.shape}, expected ({self.robot.dof},): one value in [-1, 1] per joint "
                 f"{list(self.robot.joint_names)}"
             )
-        if not np.all(np.isfinite(arr)):
+        if not np.isfinite(arr).all():
             raise ActionError(f"action contains NaN or inf: {arr.tolist()}; the env's state is unchanged")
-        return np.clip(arr, -1.0, 1.0)
+        return np.minimum(np.maximum(arr, -1.0), 1.0)
 
     # -- Gymnasium API -----------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
@@ -209,8 +209,10 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             raise ArmReachError("call reset() before step()")
         delta = self._check_action(action) * self.max_joint_step
         target = self._state.q + delta
-        violated = bool(np.any(target < self.robot.lower) or np.any(target > self.robot.upper))
-        target = self.robot.clip(target)
+        lower, upper = self.robot.lower, self.robot.upper
+        violated = bool((target < lower).any() or (target > upper).any())
+        if violated:
+            target = np.minimum(np.maximum(target, lower), upper)
         backend = self.backend
         backend.set_joint_targets(target)
         backend.step()

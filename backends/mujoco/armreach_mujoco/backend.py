@@ -456,6 +456,20 @@ class MuJoCoBackend(Backend):
             raise ArmReachError(f"link {link!r} is not part of {self.robot.name!r}") from None
         return self.data.xpos[index].copy()
 
+    def bare_loop(self, deltas: FloatArray) -> None:
+        model, data, substeps = self.model, self.data, self.physics.substeps
+        lower, upper = self.robot.lower, self.robot.upper
+        act, qpos_index, qvel_index = self._act, self._qpos, self._qvel
+        ee = self._compiled.bodies[self.robot.ee_link]
+        q = data.qpos[qpos_index].copy()
+        for delta in deltas:
+            data.ctrl[act] = np.clip(q + delta, lower, upper)
+            mujoco.mj_step(model, data, nstep=substeps)
+            mujoco.mj_kinematics(model, data)
+            q = data.qpos[qpos_index].copy()
+            _qd = data.qvel[qvel_index].copy()
+            _ee = data.xpos[ee].copy()
+
     # -- markers and rendering -----------------------------------------------------------
     def add_marker(self, name: str, radius: float, rgba: tuple[float, float, float, float]) -> None:
         self._live()

@@ -179,6 +179,24 @@ class PyBulletBackend(Backend):
         state = pb.getLinkState(self._body, index, computeForwardKinematics=True, physicsClientId=self._client)
         return np.array(state[4])
 
+    def bare_loop(self, deltas: FloatArray) -> None:
+        cid, body, joints, substeps = self._client, self._body, self._joints, self.physics.substeps
+        lower, upper = self.robot.lower, self.robot.upper
+        ee = self._link_index[self.robot.ee_link]
+        forces, kp, kd, control = self._forces, self._kp, self._kd, pb.POSITION_CONTROL
+        q = np.array([s[0] for s in pb.getJointStates(body, joints, physicsClientId=cid)])
+        for delta in deltas:
+            pb.setJointMotorControlArray(
+                body, joints, control, targetPositions=np.clip(q + delta, lower, upper).tolist(), forces=forces,
+                positionGains=kp, velocityGains=kd, physicsClientId=cid,
+            )  # fmt: skip
+            for _ in range(substeps):
+                pb.stepSimulation(physicsClientId=cid)
+            states = pb.getJointStates(body, joints, physicsClientId=cid)
+            q = np.array([s[0] for s in states])
+            _qd = [s[1] for s in states]
+            _ee = pb.getLinkState(body, ee, computeForwardKinematics=True, physicsClientId=cid)[4]
+
     # -- markers and rendering -----------------------------------------------------------
     def add_marker(self, name: str, radius: float, rgba: tuple[float, float, float, float]) -> None:
         if name in self._markers:

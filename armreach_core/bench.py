@@ -1,0 +1,256 @@
+"""``armreach bench``: what an env step costs next to the engine's own loop, and more.
+
+For each backend, in one run: the bare engine loop doing the physics of one env step
+(:meth:`Backend.bare_loop`), the full env step with random actions, reset, env
+creation with the model cached, vectorized throughput with 1 and 2 worker processes,
+and Stable-Baselines3 training throughput with the paper preset (PPO and DDPG).
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+import platform
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from armreach_core.env import ArmEnv, load_backend_class
+from armreach_core.errors import ArmReachError
+
+#: Targets the numbers are held to.
+TARGETS = {"step_over_bare": 1.25, "reset_ms": 1.0, "create_ms": 50.0}
+
+
+@dataclass
+class BackendBench:
+    backend: str
+    bare_steps_per_s: float = float("nan")
+    env_steps_per_s: float = float("nan")
+    reset_ms: float = float("nan")
+    create_ms: float = float("nan")
+    vector_steps_per_s: dict[int, float] = field(default_factory=dict)
+    sb3_steps_per_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def step_over_bare(self) -> float:
+        return self.bare_steps_per_s / self.env_steps_per_s
+
+
+def _best(repeats: int, run: Callable[[], float]) -> float:
+    """The best (smallest) of ``repeats`` timings: the least disturbed by other load."""
+    return min(run() for _ in range(repeats))
+
+
+def _deltas(n: int, dof: int, max_joint_step: float, seed: int = 0) -> np.ndarray[Any, np.dtype[np.float64]]:
+    return np.random.default_rng(seed).uniform(-1.0, 1.0, (n, dof)) * max_joint_step
+
+
+def bench_bare(env: ArmEnv, steps: int, repeats: int) -> float:
+    """Bare engine loop steps/s on ``env``'s own backend (same robot, same physics)."""
+    deltas = _deltas(steps, env.robot.dof, env.max_joint_step)
+
+    def run() -> float:
+        env.reset(seed=0)
+        t0 = time.perf_counter()
+        env.backend.bare_loop(deltas)
+        return time.perf_counter() - t0
+
+    return steps / _best(repeats, run)
+
+
+def bench_env_step(env: ArmEnv, steps: int, repeats: int) -> float:
+    """Env steps/s with random actions (resets excluded from the timing, as the bare loop has none)."""
+    actions = (_deltas(steps, env.robot.dof, 1.0)).astype(np.float32)
+
+    def run() -> float:
+        env.reset(seed=0)
+        total = 0.0
+        t0 = time.perf_counter()
+        for action in actions:
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                total += time.perf_counter() - t0
+                env.reset()
+                t0 = time.perf_counter()
+        return total + time.perf_counter() - t0
+
+    return steps / _best(repeats, run)
+
+
+def bench_reset(env: ArmEnv, n: int) -> float:
+    t0 = time.perf_counter()
+    for i in range(n):
+        env.reset(seed=i)
+    return 1000.0 * (time.perf_counter() - t0) / n
+
+
+def bench_create(backend: str, n: int) -> float:
+    ArmEnv(backend=backend).close()  # parse and compile once: the cached case is what is measured
+    t0 = time.perf_counter()
+    for _ in range(n):
+        ArmEnv(backend=backend).close()
+    return 1000.0 * (time.perf_counter() - t0) / n
+
+
+def _make(backend: str) -> Callable[[], Any]:
+    def make() -> Any:
+        return ArmEnv(backend=backend)
+
+    return make
+
+
+def bench_vector(backend: str, workers: int, steps: int) -> float:
+    """Total env steps/s of a Gymnasium AsyncVectorEnv with ``workers`` processes."""
+    from gymnasium.vector import AsyncVectorEnv
+
+    vec = AsyncVectorEnv([_make(backend) for _ in range(workers)], context="spawn")
+    try:
+        vec.reset(seed=0)
+        rng = np.random.default_rng(0)
+        for _ in range(20):  # warm up the workers
+            vec.step(rng.uniform(-1, 1, (workers, 6)).astype(np.float32))
+        n = max(steps // workers, 1)
+        actions = rng.uniform(-1, 1, (n, workers, 6)).astype(np.float32)
+        t0 = time.perf_counter()
+        for action in actions:
+            vec.step(action)
+        return n * workers / (time.perf_counter() - t0)
+    finally:
+        vec.close()
+
+
+def bench_sb3(backend: str, algo: str, steps: int) -> float:
+    """Env steps/s while training ``algo`` with the paper preset (after its warm-up)."""
+    import tempfile
+    from pathlib import Path
+
+    from armreach_core.rl.agents import build_model, make_vec_env
+    from armreach_core.rl.train import resolve_config
+
+    config = resolve_config(algo=algo, preset="paper", backend=backend)
+    with tempfile.TemporaryDirectory() as tmp:
+        env = make_vec_env(config, Path(tmp), 0, 1, append=False)
+        try:
+            model = build_model(algo, config["settings"], env, 0, None, "cpu")
+            warm = 2048 if algo == "ppo" else int(model.learning_starts) + 50
+            model.learn(warm)
+            t0 = time.perf_counter()
+            model.learn(steps, reset_num_timesteps=False)
+            return (int(model.num_timesteps) - warm) / (time.perf_counter() - t0)
+        finally:
+            env.close()
+
+
+def run_bench(
+    backends: Sequence[str],
+    *,
+    steps: int = 5000,
+    repeats: int = 3,
+    vector: bool = True,
+    sb3_steps: dict[str, int] | None = None,
+    log: Callable[[str], None] = print,
+) -> list[BackendBench]:
+    """Measure every backend; ``sb3_steps`` maps algorithm → timed training steps (None: skip)."""
+    results = []
+    for name in backends:
+        load_backend_class(name)  # a clear error now if the engine is missing
+        result = BackendBench(name)
+        env = ArmEnv(backend=name)
+        try:
+            gc.collect()
+            try:
+                result.bare_steps_per_s = bench_bare(env, steps, repeats)
+            except NotImplementedError as exc:
+                log(f"{name}: {exc}")
+            result.env_steps_per_s = bench_env_step(env, steps, repeats)
+            result.reset_ms = bench_reset(env, 200)
+        finally:
+            env.close()
+        result.create_ms = bench_create(name, 20)
+        log(
+            f"{name}: bare {result.bare_steps_per_s:,.0f} steps/s, env {result.env_steps_per_s:,.0f} steps/s "
+            f"({result.step_over_bare:.2f}x), reset {result.reset_ms:.2f} ms, create {result.create_ms:.1f} ms"
+        )
+        if vector:
+            for workers in (1, 2):
+                result.vector_steps_per_s[workers] = bench_vector(name, workers, steps)
+            log(f"{name}: vectorized {result.vector_steps_per_s}")
+        for algo, n in (sb3_steps or {}).items():
+            result.sb3_steps_per_s[algo] = bench_sb3(name, algo, n)
+            log(f"{name}: SB3 {algo} (paper preset) {result.sb3_steps_per_s[algo]:,.0f} steps/s")
+        results.append(result)
+    return results
+
+
+def machine() -> str:
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return f"{platform.machine()}, {cores} CPU cores, Python {platform.python_version()}, {platform.system()}"
+
+
+def to_json(results: list[BackendBench]) -> dict[str, Any]:
+    return {
+        "machine": machine(),
+        "targets": TARGETS,
+        "backends": [
+            {
+                "backend": r.backend,
+                "bare_steps_per_s": r.bare_steps_per_s,
+                "env_steps_per_s": r.env_steps_per_s,
+                "step_over_bare": r.step_over_bare,
+                "reset_ms": r.reset_ms,
+                "create_ms": r.create_ms,
+                "vector_steps_per_s": {str(k): v for k, v in r.vector_steps_per_s.items()},
+                "sb3_steps_per_s": r.sb3_steps_per_s,
+            }
+            for r in results
+        ],
+    }
+
+
+def to_markdown(results: list[BackendBench]) -> str:
+    def ok(value: float, limit: float) -> str:
+        return "✓" if value <= limit else "✗"
+
+    names = [r.backend for r in results]
+    rows = [
+        ("bare engine loop, steps/s", [f"{r.bare_steps_per_s:,.0f}" for r in results]),
+        ("env step (random actions), steps/s", [f"{r.env_steps_per_s:,.0f}" for r in results]),
+        (
+            f"env step cost / bare loop cost (target ≤ {TARGETS['step_over_bare']})",
+            [f"{r.step_over_bare:.2f} {ok(r.step_over_bare, TARGETS['step_over_bare'])}" for r in results],
+        ),
+        (
+            f"reset, ms (target < {TARGETS['reset_ms']:g})",
+            [f"{r.reset_ms:.2f} {ok(r.reset_ms, TARGETS['reset_ms'])}" for r in results],
+        ),
+        (
+            f"env creation, model cached, ms (target < {TARGETS['create_ms']:g})",
+            [f"{r.create_ms:.1f} {ok(r.create_ms, TARGETS['create_ms'])}" for r in results],
+        ),
+    ]
+    for workers in sorted({w for r in results for w in r.vector_steps_per_s}):
+        rows.append(
+            (
+                f"AsyncVectorEnv, {workers} worker(s), steps/s",
+                [f"{r.vector_steps_per_s.get(workers, float('nan')):,.0f}" for r in results],
+            )
+        )
+    for algo in sorted({a for r in results for a in r.sb3_steps_per_s}):
+        rows.append(
+            (
+                f"SB3 {algo.upper()} training (paper preset), steps/s",
+                [f"{r.sb3_steps_per_s.get(algo, float('nan')):,.0f}" for r in results],
+            )
+        )
+    lines = [f"| measure | {' | '.join(names)} |", "|---|" + "---|" * len(names)]
+    lines += [f"| {label} | {' | '.join(values)} |" for label, values in rows]
+    return "\n".join(lines) + "\n"
+
+
+def check_backends(backends: Sequence[str]) -> None:
+    if not backends:
+        raise ArmReachError("no backend to benchmark; install one (`pip install armreach-pybullet`)")

@@ -1,0 +1,61 @@
+"""``armreach bench``: env step vs the bare engine loop, reset, creation, vectorized and SB3 throughput."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+
+def add_parser(sub: Any) -> None:
+    parser = sub.add_parser("bench", help="benchmark every backend: JSON plus a markdown table")
+    parser.add_argument("--backends", nargs="+", default=None, help="backends (default: every installed one)")
+    parser.add_argument("--steps", type=int, default=5000, help="timed steps per measurement (default: 5000)")
+    parser.add_argument("--repeats", type=int, default=3, help="repeats; the best is kept (default: 3)")
+    parser.add_argument("--no-vector", action="store_true", help="skip the vectorized measurements")
+    parser.add_argument(
+        "--sb3",
+        default="ppo=4096,ddpg=1000",
+        help="timed SB3 training steps per algorithm, or 'none' (default: %(default)s)",
+    )
+    parser.add_argument("--out", type=Path, default=None, help="write bench.json and bench.md into this folder")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from armreach_core.bench import check_backends, run_bench, to_json, to_markdown
+    from armreach_core.errors import ConfigError
+    from armreach_core.plugins import available_backends
+
+    backends = args.backends or [b for b in available_backends() if _importable(b)]
+    check_backends(backends)
+    sb3: dict[str, int] = {}
+    if args.sb3 != "none":
+        for item in args.sb3.split(","):
+            algo, _, n = item.partition("=")
+            if algo not in ("ppo", "ddpg", "td3", "sac") or not n.isdigit():
+                raise ConfigError(f"--sb3 {args.sb3!r}: expected ALGO=N[,ALGO=N] with ALGO in ppo, ddpg, td3, sac")
+            sb3[algo] = int(n)
+    if args.steps < 10 or args.repeats < 1:
+        raise ConfigError("--steps must be >= 10 and --repeats >= 1")
+    results = run_bench(backends, steps=args.steps, repeats=args.repeats, vector=not args.no_vector, sb3_steps=sb3)
+    table = to_markdown(results)
+    print(table)
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "bench.json").write_text(json.dumps(to_json(results), indent=2) + "\n")
+        (args.out / "bench.md").write_text(table)
+        print(f"saved {args.out / 'bench.json'} and {args.out / 'bench.md'}")
+    return 0
+
+
+def _importable(backend: str) -> bool:
+    from armreach_core.env import load_backend_class
+    from armreach_core.errors import BackendUnavailableError
+
+    try:
+        load_backend_class(backend)
+    except BackendUnavailableError:
+        return False
+    return True

@@ -1,0 +1,61 @@
+"""The benchmark measures what it says: the bare loop does an env step's physics."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from armreach_core import ArmReach6DOFEnv
+from armreach_core.cli import main
+from tests.conftest import BACKENDS
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_bare_loop_does_the_physics_of_env_steps(backend: str) -> None:
+    env = ArmReach6DOFEnv(backend=backend)
+    try:
+        actions = np.random.default_rng(3).uniform(-1, 1, (60, 6))
+        env.reset(seed=5)
+        for action in actions:
+            env.step(action)
+        q_env, qd_env = env.backend.joint_state()
+        env.reset(seed=5)
+        env.backend.bare_loop(actions * env.max_joint_step)
+        q_bare, qd_bare = env.backend.joint_state()
+    finally:
+        env.close()
+    np.testing.assert_allclose(q_bare, q_env, atol=1e-9)
+    np.testing.assert_allclose(qd_bare, qd_env, atol=1e-7)
+
+
+def test_bench_command_writes_json_and_table(tmp_path, capsys) -> None:
+    out = tmp_path / "bench"
+    argv = ["bench", "--backends", "pybullet", "--steps", "50", "--repeats", "1", "--no-vector", "--sb3", "none"]
+    assert main([*argv, "--out", str(out)]) == 0
+    data = json.loads((out / "bench.json").read_text())
+    (row,) = data["backends"]
+    assert row["backend"] == "pybullet"
+    for key in ("bare_steps_per_s", "env_steps_per_s", "reset_ms", "create_ms"):
+        assert np.isfinite(row[key]) and row[key] > 0
+    assert row["step_over_bare"] == pytest.approx(row["bare_steps_per_s"] / row["env_steps_per_s"])
+    assert row["vector_steps_per_s"] == {} and row["sb3_steps_per_s"] == {}
+    table = (out / "bench.md").read_text()
+    assert "| env step cost / bare loop cost (target ≤ 1.25) |" in table
+    assert table in capsys.readouterr().out
+
+
+def test_bench_rejects_bad_options(capsys) -> None:
+    assert main(["bench", "--sb3", "a2c=5"]) == 2
+    assert "expected ALGO=N" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_bench_vectorized_and_sb3_measurements(tmp_path) -> None:
+    out = tmp_path / "bench"
+    argv = ["bench", "--backends", "pybullet", "--steps", "100", "--repeats", "1", "--sb3", "ppo=64,ddpg=20"]
+    assert main([*argv, "--out", str(out)]) == 0
+    (row,) = json.loads((out / "bench.json").read_text())["backends"]
+    assert set(row["vector_steps_per_s"]) == {"1", "2"}
+    assert row["sb3_steps_per_s"]["ppo"] > 0 and row["sb3_steps_per_s"]["ddpg"] > 0
