@@ -154,7 +154,7 @@ class ReachTask(Task):
     def _distance(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike) -> npt.NDArray[np.float64]:
         diff = np.asarray(achieved_goal, dtype=np.float64) - np.asarray(desired_goal, dtype=np.float64)
         # What np.linalg.norm(diff, axis=-1) computes, without its dispatch overhead.
-        return np.sqrt(np.add.reduce(diff * diff, axis=-1))
+        return np.asarray(np.sqrt(np.add.reduce(diff * diff, axis=-1)))
 
     def _reward(self, distance: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         return np.asarray(
