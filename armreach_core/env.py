@@ -8,6 +8,7 @@ engine lives behind :class:`~armreach_core.backend.Backend` and the scoring behi
 from __future__ import annotations
 
 import functools
+import inspect
 import os
 from pathlib import Path
 from typing import Any, SupportsFloat
@@ -132,6 +133,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             raise ConfigError(f"max_episode_steps={max_episode_steps!r} must be a positive integer")
 
         robot_name = robot or (None if urdf is not None else task_spec.robot)
+        robot_options: dict[str, Any] = {}
         if robot_name is not None:
             if urdf is not None:
                 raise ConfigError("pass either urdf= or robot=, not both")
@@ -147,7 +149,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
                 tuple(tool_joints) if tool_joints is not None else robot_spec.tool_joints,
             )
             if robot_spec.target_center is not None:
-                task_options.setdefault("target_center", robot_spec.target_center)
+                robot_options["target_center"] = robot_spec.target_center
         else:
             assert urdf is not None
             self.robot = load_robot(urdf, ee_link, home, tuple(tool_joints or ()))
@@ -164,7 +166,14 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self.camera = camera or Camera()
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.physics.control_dt)}
         try:
-            self.task: Task = task_spec.load()(self.robot, **task_options)
+            task_cls = task_spec.load()
+            # A robot's defaults for the reach task go only to tasks that take them.
+            params = inspect.signature(task_cls).parameters
+            takes_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+            for key, value in robot_options.items():
+                if takes_any or key in params:
+                    task_options.setdefault(key, value)
+            self.task: Task = task_cls(self.robot, **task_options)
         except TypeError as exc:
             raise ConfigError(f"bad option for task {task!r}: {exc}") from exc
 

@@ -20,7 +20,6 @@ import pytest
 
 import armreach_core
 from armreach_core import ArmState, BodyState, ConfigError
-from armreach_core.bundled import asset_path
 from tests.conftest import BACKENDS, TASK_BACKENDS
 
 grasp = pytest.importorskip("armreach_grasp", reason="armreach-grasp is not installed (pip install -e tasks/grasp)")
@@ -165,7 +164,7 @@ def test_dense_reward_without_info_is_an_error_and_options_are_checked(backend):
     with pytest.raises(ConfigError, match="reward_type"):
         ArmGraspEnv(backend=backend, reward_type="shaped")
     with pytest.raises(ConfigError, match="needs a robot with gripper joints"):
-        ArmGraspEnv(backend=backend, urdf=asset_path("ar6", "ar6.urdf"))
+        ArmGraspEnv(backend=backend, robot="ar6")  # a robot without tool joints
 
 
 @pytest.mark.parametrize("reward_type", ["sparse", "dense"])
