@@ -145,3 +145,31 @@ def run_episode(env: Any, seed: int, max_steps: int | None = None) -> dict[str, 
             success = bool(info["is_success"])
             break
     return {"success": success, "steps": steps, "object": np.array(cube), "info": info}
+
+
+def success_rate(backend: str, episodes: int = 100, first_seed: int = 0) -> dict[str, Any]:
+    """Success rate of the scripted grasp over ``episodes`` seeded episodes (seeds from ``first_seed``)."""
+    import gymnasium as gym
+
+    env = gym.make("armreach/Grasp-v0", backend=backend)
+    results = [run_episode(env, seed) for seed in range(first_seed, first_seed + episodes)]
+    env.close()
+    successes = [r for r in results if r["success"]]
+    return {
+        "backend": backend,
+        "episodes": episodes,
+        "success_rate": len(successes) / episodes,
+        "mean_steps_to_success": float(np.mean([r["steps"] for r in successes])) if successes else None,
+        "failed_seeds": [first_seed + i for i, r in enumerate(results) if not r["success"]],
+    }
+
+
+if __name__ == "__main__":  # python -m armreach_grasp.scripted [episodes] [backend ...]
+    import json
+    import sys
+
+    import armreach_core
+
+    count = int(sys.argv[1]) if len(sys.argv) > 1 else 100
+    for name in sys.argv[2:] or armreach_core.available_backends():
+        print(json.dumps(success_rate(name, count)))
