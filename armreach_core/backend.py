@@ -196,7 +196,7 @@ class Backend(ABC):
         return ()
 
     def set_body_pose(self, name: str, position: npt.ArrayLike, orientation: npt.ArrayLike = (1, 0, 0, 0)) -> None:
-        """Teleport body ``name`` to ``position`` (m) and ``orientation`` (w, x, y, z), at rest."""
+        """Teleport free body ``name`` to ``position`` (m) and ``orientation`` (w, x, y, z), at rest."""
         raise self._unsupported("bodies")
 
     def body_state(self, name: str) -> BodyState:

@@ -101,6 +101,10 @@ def test_backend_bodies_pose_round_trip_and_errors(env):
         backend.add_box("tcp", (0.01, 0.01, 0.01), 0.1)
     with pytest.raises(armreach_core.ArmReachError, match="neither a link"):
         backend.contact_force("nothing", OBJECT)
+    with pytest.raises(armreach_core.ArmReachError, match="fixed"):
+        backend.set_body_pose(TABLE, [0.0, 0.0, 1.0])
+    with pytest.raises(armreach_core.ArmReachError, match="no body called"):
+        backend.set_body_pose("nothing", [0.0, 0.0, 1.0])
 
 
 def test_action_maps_arm_steps_and_one_gripper_command(env):

@@ -591,7 +591,9 @@ class MuJoCoBackend(Backend):
         try:
             return self._compiled.free[name]
         except KeyError:
-            raise ArmReachError(f"no free body called {name!r}; add one with add_box (mass > 0) first") from None
+            if any(b.name == name for b in self._scene.boxes):
+                raise ArmReachError(f"body {name!r} is fixed (mass 0); only free bodies can be moved") from None
+            raise ArmReachError(f"no body called {name!r}; add it with add_box first") from None
 
     def set_body_pose(self, name: str, position: npt.ArrayLike, orientation: npt.ArrayLike = (1, 0, 0, 0)) -> None:
         self._live()
@@ -605,7 +607,9 @@ class MuJoCoBackend(Backend):
         mujoco.mj_forward(self.model, data)
 
     def body_state(self, name: str) -> BodyState:
-        body = self._body_id(name)
+        if BODY_PREFIX + name not in self._compiled.bodies:
+            raise ArmReachError(f"no body called {name!r}; add it with add_box first")
+        body = self._compiled.bodies[BODY_PREFIX + name]
         data = self.data
         position, orientation = data.xpos[body].copy(), data.xquat[body].copy()
         if name not in self._compiled.free:

@@ -232,6 +232,8 @@ class PyBulletBackend(Backend):
 
     def set_body_pose(self, name: str, position: npt.ArrayLike, orientation: npt.ArrayLike = (1, 0, 0, 0)) -> None:
         body, cid = self._body_id(name), self._client
+        if name not in self._free:
+            raise ArmReachError(f"body {name!r} is fixed (mass 0); only free bodies can be moved")
         w, x, y, z = (float(v) for v in np.asarray(orientation, dtype=np.float64))
         pos = [float(v) for v in np.asarray(position, dtype=np.float64)]
         # Bullet keeps a body's contact points, and their impulses that warm-start the solver,
