@@ -6,11 +6,12 @@ STAMP := $(VENV)/.installed
 
 .PHONY: install test test-no-mujoco test-all lint demo bench clean
 
-$(STAMP): pyproject.toml backends/pybullet/pyproject.toml backends/mujoco/pyproject.toml constraints-cpu.txt
+$(STAMP): pyproject.toml backends/pybullet/pyproject.toml backends/mujoco/pyproject.toml tasks/grasp/pyproject.toml constraints-cpu.txt
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt torch
-	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt -e ".[dev]" -e backends/pybullet -e backends/mujoco
+	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt -e ".[dev]" -e backends/pybullet -e backends/mujoco \
+		-e tasks/grasp
 	touch $(STAMP)
 
 install: $(STAMP)

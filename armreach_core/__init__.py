@@ -6,7 +6,7 @@ registers one Gymnasium id per task (``armreach/Reach-v0``, ...).
 
 from __future__ import annotations
 
-from armreach_core.backend import ArmState, Backend, Camera, PhysicsConfig
+from armreach_core.backend import ArmState, Backend, BodyState, Camera, PhysicsConfig
 from armreach_core.env import ArmEnv
 from armreach_core.errors import (
     ActionError,
@@ -42,6 +42,7 @@ __all__ = [
     "Backend",
     "BackendSpec",
     "BackendUnavailableError",
+    "BodyState",
     "Camera",
     "ConfigError",
     "PhysicsConfig",

@@ -4,13 +4,20 @@ A backend adapts one engine to armreach and holds no task logic. It is built fro
 :class:`~armreach_core.robot.RobotModel` and addresses joints and links by their URDF
 names: joint vectors are always in ``robot.joint_names`` order. Units are SI, z is up,
 and quaternions (where a backend exposes orientation) are ``(w, x, y, z)``.
+
+Tasks that handle objects (grasping) also use *bodies*: boxes added to the world by
+name (:meth:`Backend.add_box`), free or fixed, whose pose and velocity a backend sets and
+reads, and contacts and friction addressed by robot link or body name. These methods
+have defaults that raise :class:`NotImplementedError`, so a backend written for reaching
+alone keeps working.
 """
 
 from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
@@ -70,15 +77,43 @@ class Camera:
 
 
 @dataclass(frozen=True)
+class BodyState:
+    """Pose and velocity of a body (world frame, SI units, quaternion ``(w, x, y, z)``)."""
+
+    position: FloatArray
+    orientation: FloatArray
+    linear_velocity: FloatArray
+    angular_velocity: FloatArray
+
+    def is_finite(self) -> bool:
+        return all(bool(np.all(np.isfinite(v))) for v in self._values())
+
+    def nan_to_num(self) -> BodyState:
+        """A copy with non-finite values replaced (used when the physics blew up)."""
+        pos, quat, lin, ang = (np.nan_to_num(v, posinf=0.0, neginf=0.0) for v in self._values())
+        if not np.any(quat):
+            quat = np.array([1.0, 0.0, 0.0, 0.0])
+        return BodyState(pos, quat, lin, ang)
+
+    def _values(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        return self.position, self.orientation, self.linear_velocity, self.angular_velocity
+
+
+@dataclass(frozen=True)
 class ArmState:
-    """What the core reads from a backend after each step (base frame, SI units)."""
+    """What the core reads from a backend after each step (base frame, SI units).
+
+    ``objects`` holds the state of every free body in the world, by name (empty for reach).
+    """
 
     q: FloatArray
     qd: FloatArray
     ee_pos: FloatArray
+    objects: Mapping[str, BodyState] = field(default_factory=dict)
 
     def is_finite(self) -> bool:
-        return bool(np.isfinite(np.concatenate((self.q, self.qd, self.ee_pos))).all())
+        arm = bool(np.isfinite(np.concatenate((self.q, self.qd, self.ee_pos))).all())
+        return arm and all(body.is_finite() for body in self.objects.values())
 
 
 class Backend(ABC):
@@ -138,6 +173,58 @@ class Backend(ABC):
         raise NotImplementedError(f"backend {self.name!r} has no bare loop for benchmarks")
 
     def read_state(self) -> ArmState:
-        """Joint state and end-effector position in one call (backends may batch the reads)."""
+        """Joint state, end-effector position and free bodies in one call (backends may batch the reads)."""
         q, qd = self.joint_state()
-        return ArmState(q=q, qd=qd, ee_pos=self.link_position(self.robot.ee_link))
+        objects = {name: self.body_state(name) for name in self.free_bodies()}
+        return ArmState(q=q, qd=qd, ee_pos=self.link_position(self.robot.ee_link), objects=objects)
+
+    # -- bodies: optional, for tasks with objects ------------------------------------------
+    def _unsupported(self, what: str) -> NotImplementedError:
+        return NotImplementedError(f"backend {self.name!r} does not support {what}")
+
+    def add_box(
+        self,
+        name: str,
+        half_extents: tuple[float, float, float],
+        mass: float,
+        *,
+        friction: float = 1.0,
+        rgba: tuple[float, float, float, float] = (0.8, 0.3, 0.2, 1.0),
+        position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        """Add a box called ``name`` that collides with the robot, the ground and other bodies.
+
+        ``mass`` (kg) 0 makes it fixed in the world (a table), otherwise it is a free
+        body with a uniform-density inertia. ``friction`` is its sliding friction
+        coefficient (see :meth:`set_friction`). Call before the first reset: engines may
+        rebuild their model. ``name`` must not be a link of the robot.
+        """
+        raise self._unsupported("bodies")
+
+    def free_bodies(self) -> tuple[str, ...]:
+        """Names of the free (non-fixed) bodies, in the order they were added."""
+        return ()
+
+    def set_body_pose(self, name: str, position: npt.ArrayLike, orientation: npt.ArrayLike = (1, 0, 0, 0)) -> None:
+        """Teleport free body ``name`` to ``position`` (m) and ``orientation`` (w, x, y, z), at rest."""
+        raise self._unsupported("bodies")
+
+    def body_state(self, name: str) -> BodyState:
+        """Pose and velocity of body ``name`` (its frame is its centre of mass)."""
+        raise self._unsupported("bodies")
+
+    def contact_force(self, a: str, b: str) -> float:
+        """Total normal force (N) between ``a`` and ``b``, each a robot link or a body; 0 without contact.
+
+        Read from the last physics step.
+        """
+        raise self._unsupported("contact queries")
+
+    def set_friction(self, name: str, friction: float) -> None:
+        """Sliding friction coefficient of a robot link's or a body's collision shapes.
+
+        Engines combine the two surfaces of a contact differently (PyBullet multiplies
+        the coefficients, MuJoCo takes the larger), so give both surfaces the same value
+        for the same result on every engine. Call before the first reset.
+        """
+        raise self._unsupported("friction")

@@ -8,6 +8,7 @@ engine lives behind :class:`~armreach_core.backend.Backend` and the scoring behi
 from __future__ import annotations
 
 import functools
+import inspect
 import os
 from pathlib import Path
 from typing import Any, SupportsFloat
@@ -27,20 +28,26 @@ JOINT_LIMIT_MODES = ("clip", "terminate")
 
 
 @functools.lru_cache(maxsize=64)
-def _robot(path: str, mtime: float, ee_link: str | None, home: tuple[float, ...] | None) -> RobotModel:
-    return RobotModel(path, ee_link=ee_link, home=home)
+def _robot(
+    path: str, mtime: float, ee_link: str | None, home: tuple[float, ...] | None, tool_joints: tuple[str, ...]
+) -> RobotModel:
+    return RobotModel(path, ee_link=ee_link, home=home, tool_joints=tool_joints)
 
 
 def load_robot(
-    urdf: str | os.PathLike[str], ee_link: str | None = None, home: npt.ArrayLike | None = None
+    urdf: str | os.PathLike[str],
+    ee_link: str | None = None,
+    home: npt.ArrayLike | None = None,
+    tool_joints: tuple[str, ...] = (),
 ) -> RobotModel:
-    """A :class:`RobotModel`, cached per (file, modification time, ee_link, home)."""
+    """A :class:`RobotModel`, cached per (file, modification time, ee_link, home, tool_joints)."""
     path = Path(urdf).expanduser()
     mtime = path.stat().st_mtime if path.is_file() else -1.0
     home_key = None if home is None else tuple(float(v) for v in np.asarray(home, dtype=np.float64).ravel())
+    tools = tuple(str(name) for name in tool_joints)
     if mtime < 0:
-        return RobotModel(path, ee_link=ee_link, home=home)  # raises the URDFError
-    return _robot(str(path.resolve()), mtime, ee_link, home_key)
+        return RobotModel(path, ee_link=ee_link, home=home, tool_joints=tools)  # raises the URDFError
+    return _robot(str(path.resolve()), mtime, ee_link, home_key, tools)
 
 
 def load_backend_class(name: str) -> type[Backend]:
@@ -84,6 +91,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             ``"terminate"`` ends the episode when a target leaves them (the paper's rule).
         self_collision, inertia_from_file: see :class:`~armreach_core.backend.PhysicsConfig`.
         camera: a :class:`~armreach_core.backend.Camera` for rendering.
+        tool_joints: joints off the arm's chain to actuate too (a gripper's fingers);
+            default the registered robot's (none for a ``urdf``).
         **task_options: passed to the task.
     """
 
@@ -107,6 +116,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self_collision: bool = False,
         inertia_from_file: bool = True,
         camera: Camera | None = None,
+        tool_joints: tuple[str, ...] | list[str] | None = None,
         **task_options: Any,
     ) -> None:
         registry = get_host().registry
@@ -123,6 +133,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             raise ConfigError(f"max_episode_steps={max_episode_steps!r} must be a positive integer")
 
         robot_name = robot or (None if urdf is not None else task_spec.robot)
+        robot_options: dict[str, Any] = {}
         if robot_name is not None:
             if urdf is not None:
                 raise ConfigError("pass either urdf= or robot=, not both")
@@ -132,13 +143,16 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
                 )
             robot_spec = registry.robots[robot_name]
             self.robot = load_robot(
-                robot_spec.urdf, ee_link or robot_spec.ee_link, home if home is not None else robot_spec.home
+                robot_spec.urdf,
+                ee_link or robot_spec.ee_link,
+                home if home is not None else robot_spec.home,
+                tuple(tool_joints) if tool_joints is not None else robot_spec.tool_joints,
             )
             if robot_spec.target_center is not None:
-                task_options.setdefault("target_center", robot_spec.target_center)
+                robot_options["target_center"] = robot_spec.target_center
         else:
             assert urdf is not None
-            self.robot = load_robot(urdf, ee_link, home)
+            self.robot = load_robot(urdf, ee_link, home, tuple(tool_joints or ()))
 
         self.task_name = task
         self.backend_name = backend
@@ -152,11 +166,18 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self.camera = camera or Camera()
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.physics.control_dt)}
         try:
-            self.task: Task = task_spec.load()(self.robot, **task_options)
+            task_cls = task_spec.load()
+            # A robot's defaults for the reach task go only to tasks that take them.
+            params = inspect.signature(task_cls).parameters
+            takes_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+            for key, value in robot_options.items():
+                if takes_any or key in params:
+                    task_options.setdefault(key, value)
+            self.task: Task = task_cls(self.robot, **task_options)
         except TypeError as exc:
             raise ConfigError(f"bad option for task {task!r}: {exc}") from exc
 
-        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.robot.dof,), dtype=np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.task.action_size(),), dtype=np.float32)
         self.observation_space = self.task.observation_space()
         if isinstance(self.observation_space, gym.spaces.Dict) and "desired_goal" in self.observation_space.spaces:
             # Only goal-conditioned envs expose these (SB3 and HER detect them by name):
@@ -184,11 +205,14 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             arr = np.asarray(action, dtype=np.float64)
         except (TypeError, ValueError) as exc:
             raise ActionError(f"action {action!r} is not numeric: {exc}") from None
-        if arr.shape != (self.robot.dof,):
-            raise ActionError(
-                f"action has shape {arr.shape}, expected ({self.robot.dof},): one value in [-1, 1] per joint "
-                f"{list(self.robot.joint_names)}"
+        size = self.task.action_size()
+        if arr.shape != (size,):
+            what = (
+                f"one value in [-1, 1] per joint {list(self.robot.joint_names)}"
+                if size == self.robot.dof
+                else f"values in [-1, 1] as task {self.task_name!r} defines them"
             )
+            raise ActionError(f"action has shape {arr.shape}, expected ({size},): {what}")
         if not np.isfinite(arr).all():
             raise ActionError(f"action contains NaN or inf: {arr.tolist()}; the env's state is unchanged")
         return np.minimum(np.maximum(arr, -1.0), 1.0)
@@ -207,8 +231,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         if self._state is None:
             raise ArmReachError("call reset() before step()")
-        delta = self._check_action(action) * self.max_joint_step
-        target = self._state.q + delta
+        target = self.task.joint_targets(self._check_action(action), self._state.q, self.max_joint_step)
         lower, upper = self.robot.lower, self.robot.upper
         violated = bool((target < lower).any() or (target > upper).any())
         if violated:
@@ -223,6 +246,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
                 q=self.robot.clip(np.nan_to_num(state.q)),
                 qd=np.nan_to_num(state.qd, posinf=0.0, neginf=0.0),
                 ee_pos=np.nan_to_num(state.ee_pos),
+                objects={name: body.nan_to_num() for name, body in state.objects.items()},
             )
         self._state = state
         self._elapsed += 1

@@ -72,6 +72,10 @@ class RobotModel:
         urdf: path to the URDF file.
         ee_link: the end-effector link; by default the tip of the serial chain.
         home: initial joint configuration (rad); by default zero, moved inside the limits.
+        tool_joints: movable joints off the chain to the end effector that are actuated
+            too (a gripper's fingers), in this order after the chain's joints. They have
+            no effect on :meth:`forward_kinematics`; their Jacobian columns are zero.
+            Default none: only the chain is actuated.
 
     Raises:
         URDFError: the file cannot be used, with the reason and the fix.
@@ -82,6 +86,7 @@ class RobotModel:
         urdf: str | os.PathLike[str],
         ee_link: str | None = None,
         home: npt.ArrayLike | None = None,
+        tool_joints: tuple[str, ...] = (),
     ) -> None:
         parsed = read_urdf(urdf)
         self.parsed: ParsedURDF = parsed
@@ -132,7 +137,13 @@ class RobotModel:
                 f"URDF {str(self.urdf_path)!r} has no movable joint between {self.root_link!r} and "
                 f"{self.ee_link!r}; an arm needs revolute, continuous or prismatic joints"
             )
-        self.joints: tuple[JointSpec, ...] = tuple(self._joint_spec(j) for j in movable)
+        #: Number of actuated joints on the chain to the end effector (the arm proper).
+        self.arm_dof: int = len(movable)
+        if len(set(tool_joints)) != len(tool_joints):
+            raise URDFError(f"tool_joints {list(tool_joints)} name a joint twice")
+        tools = [self._tool_joint(joints, name, chain) for name in tool_joints]
+        self.tool_joint_names: tuple[str, ...] = tuple(str(j.name) for j in tools)
+        self.joints: tuple[JointSpec, ...] = tuple(self._joint_spec(j) for j in (*movable, *tools))
         self.joint_names: tuple[str, ...] = tuple(j.name for j in self.joints)
         self.lower: FloatArray = np.array([j.lower for j in self.joints])
         self.upper: FloatArray = np.array([j.upper for j in self.joints])
@@ -180,6 +191,20 @@ class RobotModel:
 
     def _movable_count(self, link: str) -> int:
         return sum(1 for name in self._chain_to(link) if self._joint_types[name] in MOVABLE_TYPES)
+
+    def _tool_joint(self, joints: dict[str, Any], name: str, chain: list[str]) -> Any:
+        joint = joints.get(name)
+        if joint is None:
+            raise URDFError(f"tool joint {name!r} is not a joint of {self.name!r}; joints are: {', '.join(joints)}")
+        if joint.type not in MOVABLE_TYPES:
+            raise URDFError(
+                f"tool joint {name!r} has type {joint.type!r}; it must be revolute, continuous or prismatic"
+            )
+        if name in chain:
+            raise URDFError(f"tool joint {name!r} lies on the chain to {self.ee_link!r}, which is actuated already")
+        if joint.mimic is not None:
+            raise URDFError(f"tool joint {name!r} is a mimic joint; actuate each finger as its own joint")
+        return joint
 
     @staticmethod
     def _joint_spec(joint: Any) -> JointSpec:
@@ -290,6 +315,7 @@ class RobotModel:
         columns = []
         for origin, axis, kind in frames:
             columns.append(axis if kind == "prismatic" else np.cross(axis, ee - origin))
+        columns += [np.zeros_like(ee)] * (self.dof - self.arm_dof)  # tool joints do not move the end effector
         return np.stack(columns, axis=-1)
 
     def clip(self, q: npt.ArrayLike) -> FloatArray:

@@ -70,6 +70,9 @@ class RobotSpec:
         home: initial joint configuration in the URDF's joint order (rad).
         target_center: centre of the reach task's target sphere (m, base frame).
         description: one line for ``armreach plugins``.
+        tool_joints: movable joints off the arm's chain that are actuated too (a
+            gripper's fingers), appended to the joint vector in this order; ``home``
+            includes them. See :class:`~armreach_core.robot.RobotModel`.
     """
 
     name: str
@@ -78,6 +81,7 @@ class RobotSpec:
     home: tuple[float, ...] | None = None
     target_center: tuple[float, float, float] | None = None
     description: str = ""
+    tool_joints: tuple[str, ...] = ()
 
 
 Spec = BackendSpec | TaskSpec | RobotSpec

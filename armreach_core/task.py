@@ -17,16 +17,35 @@ import numpy as np
 import numpy.typing as npt
 from gymnasium import spaces
 
-from armreach_core.backend import ArmState
+from armreach_core.backend import ArmState, BodyState
 from armreach_core.robot import FloatArray, RobotModel
 
 
 class Scene(Protocol):
-    """The part of a backend a task may use."""
+    """The part of a backend a task may use (see :class:`~armreach_core.backend.Backend`)."""
 
     def add_marker(self, name: str, radius: float, rgba: tuple[float, float, float, float]) -> None: ...
 
     def set_marker(self, name: str, position: FloatArray) -> None: ...
+
+    def add_box(
+        self,
+        name: str,
+        half_extents: tuple[float, float, float],
+        mass: float,
+        *,
+        friction: float = 1.0,
+        rgba: tuple[float, float, float, float] = (0.8, 0.3, 0.2, 1.0),
+        position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> None: ...
+
+    def set_body_pose(self, name: str, position: npt.ArrayLike, orientation: npt.ArrayLike = (1, 0, 0, 0)) -> None: ...
+
+    def body_state(self, name: str) -> BodyState: ...
+
+    def contact_force(self, a: str, b: str) -> float: ...
+
+    def set_friction(self, name: str, friction: float) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -57,6 +76,8 @@ class Task(ABC):
 
     * ``setup_scene(scene)`` once, after the backend is built;
     * ``initialize_episode(scene, rng)`` at every reset, before the first observation;
+    * ``joint_targets(action, q, max_joint_step)`` at every step, to turn the action
+      into position targets (by default one relative step per joint);
     * ``observation(state)`` and ``evaluate(state)`` after every reset and step.
     """
 
@@ -69,6 +90,18 @@ class Task(ABC):
     @abstractmethod
     def observation_space(self) -> spaces.Space[Any]:
         """The observation space; must not need a reset."""
+
+    def action_size(self) -> int:
+        """Length of the action vector, each value in [-1, 1]; default one per actuated joint."""
+        return self.robot.dof
+
+    def joint_targets(self, action: FloatArray, q: FloatArray, max_joint_step: float) -> FloatArray:
+        """Position targets for every actuated joint, from an action already clipped into [-1, 1].
+
+        The default moves each joint by ``action * max_joint_step`` from its angle ``q``.
+        The env then checks the targets against the joint limits and clips them into it.
+        """
+        return q + action * max_joint_step
 
     def setup_scene(self, scene: Scene) -> None:  # noqa: B027 - optional callback
         """Add markers or objects to the world (called once)."""

@@ -26,7 +26,7 @@ def test_robot_folder_is_complete(name):
     readme = folder / "README.md"
     assert readme.is_file()
     assert len(readme.read_text().strip()) > 200
-    robot = armreach_core.RobotModel(spec.urdf, ee_link=spec.ee_link, home=spec.home)
+    robot = armreach_core.RobotModel(spec.urdf, ee_link=spec.ee_link, home=spec.home, tool_joints=spec.tool_joints)
     for joint in robot.joint_names:
         assert joint in readme.read_text(), f"{name}'s README does not describe joint {joint}"
 

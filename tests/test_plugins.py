@@ -3,7 +3,12 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import subprocess
+import sys
 from importlib.metadata import EntryPoint
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -12,7 +17,7 @@ import pytest
 import armreach_core
 from armreach_core import PluginError, RobotSpec, TaskSpec, hookimpl
 from armreach_core.cli import main
-from armreach_core.plugins import PluginHost, PluginLoadWarning
+from armreach_core.plugins import DISABLE_ENV, PluginHost, PluginLoadWarning
 from armreach_core.reach import ReachTask
 from tests.conftest import BACKENDS
 
@@ -185,3 +190,92 @@ def test_cli_lists_plugins_with_versions(capsys):
     assert main(["plugins"]) == 0
     text = capsys.readouterr().out
     assert "armreach-pybullet" in text
+
+
+# -- a real distribution, installed ------------------------------------------------------
+PLUGIN_DIST = Path(__file__).parent / "plugin_dist"
+PROBE = """
+import json, warnings
+warnings.simplefilter("ignore")
+import gymnasium as gym
+import armreach_core
+host = armreach_core.get_host()
+out = {"tasks": armreach_core.available_tasks(), "disabled": host.disabled,
+       "failures": [[f.name, f.distribution, f.stage, f.error] for f in host.failures],
+       "plugins": {p.name: p.distribution for p in host.plugins()}}
+if "toy" in out["tasks"]:
+    env = gym.make("armreach/Toy-v0", backend="pybullet")
+    obs, _ = env.reset(seed=0)
+    obs, reward, *_ = env.step(env.action_space.sample())
+    out["made"] = [type(env.unwrapped).__name__, env.unwrapped.task.success_threshold, len(obs)]
+    env.close()
+print(json.dumps(out))
+"""
+
+
+@pytest.fixture(scope="module")
+def installed_toy(tmp_path_factory):
+    """``tests/plugin_dist`` built and installed into a temporary folder (the source tree stays clean)."""
+    tmp = tmp_path_factory.mktemp("toy")
+    source = shutil.copytree(PLUGIN_DIST, tmp / "src")
+    target = tmp / "site"
+    subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--no-deps", "--no-build-isolation", "-q", "--target", str(target)]
+        + [str(source)],
+        check=True,
+        capture_output=True,
+    )
+    return target
+
+
+def _probe(site, **env_vars):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]), **env_vars}
+    if DISABLE_ENV not in env_vars:
+        env.pop(DISABLE_ENV, None)
+    result = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, check=True)
+    return json.loads(result.stdout)
+
+
+@pytest.mark.skipif("pybullet" not in BACKENDS, reason="needs the PyBullet backend")
+def test_installed_plugin_distribution_is_made_with_gym_and_its_broken_plugin_reported(installed_toy):
+    out = _probe(installed_toy)
+    assert "toy" in out["tasks"] and "reach" in out["tasks"]
+    assert out["plugins"]["toy"] == "armreach-toy-task"
+    assert out["made"] == ["ArmEnv", 0.20, 21]  # made by gym.make, its own option, the reach layout
+    # the distribution's second entry point cannot import: reported by name and distribution, others loaded
+    (failure,) = [f for f in out["failures"] if f[0] == "toy-broken"]
+    assert failure[1:3] == ["armreach-toy-task", "import"]
+    assert "armreach_no_such_dependency" in failure[3]
+    assert "pybullet" in out["plugins"] and "armreach" in out["plugins"]
+
+
+def test_installed_plugin_distribution_is_disabled_by_the_env_var(installed_toy):
+    by_plugin = _probe(installed_toy, **{DISABLE_ENV: "toy-broken"})
+    assert "toy" in by_plugin["tasks"] and by_plugin["disabled"] == ["toy-broken"]
+    assert not [f for f in by_plugin["failures"] if f[0].startswith("toy")]
+    by_distribution = _probe(installed_toy, **{DISABLE_ENV: "armreach-toy-task"})
+    assert "toy" not in by_distribution["tasks"] and "reach" in by_distribution["tasks"]
+    assert sorted(by_distribution["disabled"]) == ["toy", "toy-broken"]
+
+
+@pytest.mark.skipif(not BACKENDS, reason="no physics backend installed")
+def test_the_copy_me_task_template_works(monkeypatch):
+    tomllib = pytest.importorskip("tomllib")
+    from gymnasium.utils.env_checker import check_env
+
+    template = Path(__file__).resolve().parents[1] / "tasks" / "template"
+    project = tomllib.loads((template / "pyproject.toml").read_text())
+    (entry_point,) = project["project"]["entry-points"]["armreach"].items()
+    monkeypatch.syspath_prepend(str(template))
+    plugin = __import__(entry_point[1], fromlist=["armreach_register_tasks"])
+    armreach_core.register_plugin(plugin, name=entry_point[0])
+    try:
+        env = gym.make("armreach/MyTask-v0", backend=BACKENDS[0], height=0.25)
+        check_env(env.unwrapped, skip_render_check=True)
+        obs, info = env.reset(seed=0)
+        assert obs[-1] == pytest.approx(0.25) and info["is_success"] is False
+        env.close()
+    finally:
+        armreach_core.unregister_plugin(entry_point[0])
+        for name in [m for m in sys.modules if m.startswith("armreach_mytask")]:
+            monkeypatch.delitem(sys.modules, name)

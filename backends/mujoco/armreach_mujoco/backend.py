@@ -10,7 +10,7 @@ Model
     integrator, joint damping from the URDF (URDF ``friction`` is dropped, as PyBullet
     ignores it), one position actuator per joint, the ground plane and the markers
     (mocap bodies with a visual-only sphere). Compiled models are cached per (URDF file,
-    modification time, physics settings, markers); envs share the read-only ``MjModel``
+    modification time, physics settings, markers, bodies); envs share the read-only ``MjModel``
     and each gets its own ``MjData``.
 
 Position control, matched to PyBullet
@@ -32,7 +32,8 @@ Position control, matched to PyBullet
       a large ``kv`` clamps too early and chatters (bang-bang). ``kv = 2 M/dt`` was the best
       compromise;
     * gravity compensation routed through the actuators (``gravcomp`` on the arm's bodies,
-      ``actuatorgravcomp`` on its joints), so the servo holds the pose like PyBullet's motor;
+      ``actuatorgravcomp`` on its joints), so the servo holds the pose like PyBullet's motor
+    (added bodies get no gravity compensation);
       the joint's ``actuatorfrcrange`` = URDF effort bounds servo + gravity together;
     * armature :data:`ARMATURE` = 0.01 (xarm6's wrist drifts without it; 0.1 is too much);
       ``implicitfast`` integrator.
@@ -59,8 +60,21 @@ Position control, matched to PyBullet
     closed-loop reach corrects them.
 
 Contacts
-    With ``self_collision`` off, the arm's collision geoms collide with the ground only
-    (contype/conaffinity bits). With it on they also collide with each other, except
+    With ``self_collision`` off, the arm's collision geoms collide with the ground and with
+    bodies added by :meth:`MuJoCoBackend.add_box` only (contype/conaffinity bits); bodies
+    collide with the arm, the ground and each other.
+
+    PyBullet's contacts are rigid; MuJoCo's are soft, so a gripped cube sinks into the
+    fingers and slides out of them under default settings. Once a body is added the model
+    gets the noslip solver (:data:`NOSLIP_ITERATIONS`) and the bodies' contacts the stiffest
+    safe time constant, two physics steps (``solref``, weighted by ``solmix`` over the arm's
+    default). Measured with the grasp task's scripted pick (seeds 0-3): without them the
+    fingers closed 12 mm into the cube on impact and the lifted cube slid 2.4 mm/s; with
+    them a held cube does not slide, but it still sinks 5-9 mm in the grip while it is
+    lifted (PyBullet: under 1 mm), because MuJoCo's box-box contact between a finger and
+    the cube drops to a single point at times and the cube pivots. Settings searched:
+    elliptic cones with ``impratio`` 10, ``solimp`` (0.95, 0.99), contact margins of 2 and
+    5 mm; none removed the sinking. With it on they also collide with each other, except
     across each URDF joint (PyBullet's ``URDF_USE_SELF_COLLISION_EXCLUDE_PARENT``); this
     explicit exclusion also covers the base, which is welded to the world and so escapes
     MuJoCo's own parent-child filter.
@@ -79,7 +93,7 @@ import logging
 import os
 import threading
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -87,7 +101,7 @@ import numpy as np
 import numpy.typing as npt
 from lxml import etree
 
-from armreach_core.backend import Backend, Camera, PhysicsConfig
+from armreach_core.backend import Backend, BodyState, Camera, PhysicsConfig
 from armreach_core.errors import ArmReachError, BackendUnavailableError, URDFError
 from armreach_core.robot import FloatArray, RobotModel
 
@@ -124,8 +138,15 @@ GROUND_RGBA = (0.86, 0.87, 0.89, 1.0)
 #: Mesh formats MuJoCo reads itself; others are converted to .obj with trimesh.
 NATIVE_MESHES = (".stl", ".obj", ".msh")
 #: Collision bits: the arm is type 2 and collides with type 1 (the ground), and with type 2
-#: too when self-collision is on.
-ARM_CONTYPE, GROUND_CONTYPE = 2, 1
+#: too when self-collision is on. Added bodies are type 4 and collide with all three.
+ARM_CONTYPE, GROUND_CONTYPE, BODY_CONTYPE = 2, 1, 4
+BODY_PREFIX = "armreach_body_"
+#: Contact settings once bodies are added (see the module docstring, "Contacts"): noslip
+#: solver iterations, and the contact time constant of bodies in physics steps (MuJoCo's
+#: stiffest safe value is 2) with a solmix weight that makes it win against the arm's.
+NOSLIP_ITERATIONS = 10
+BODY_SOLREF_STEPS = 2.0
+BODY_SOLMIX = 100.0
 MODEL_CACHE_SIZE = 32
 
 log = logging.getLogger("armreach.mujoco")
@@ -139,6 +160,25 @@ class _Marker:
 
 
 @dataclass(frozen=True)
+class _Box:
+    name: str
+    half_extents: tuple[float, float, float]
+    mass: float
+    friction: float
+    rgba: tuple[float, float, float, float]
+    position: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class _Scene:
+    """What tasks added to the world: markers, boxes and friction coefficients of robot links."""
+
+    markers: tuple[_Marker, ...] = ()
+    boxes: tuple[_Box, ...] = ()
+    frictions: tuple[tuple[str, float], ...] = ()
+
+
+@dataclass(frozen=True)
 class _Compiled:
     """A compiled model and the addresses the backend reads (shared by every env that uses it)."""
 
@@ -148,6 +188,7 @@ class _Compiled:
     actuators: npt.NDArray[np.intp]
     bodies: dict[str, int]
     mocap: dict[str, int]
+    free: dict[str, tuple[int, int]]  # body name -> (qpos address, dof address) of its free joint
 
 
 _cache: OrderedDict[tuple[Any, ...], _Compiled] = OrderedDict()
@@ -232,7 +273,7 @@ def _links_without_inertial(robot: RobotModel) -> list[str]:
     return moving
 
 
-def _build(robot: RobotModel, physics: PhysicsConfig, markers: tuple[_Marker, ...]) -> _Compiled:
+def _build(robot: RobotModel, physics: PhysicsConfig, scene: _Scene) -> _Compiled:
     spec = mujoco.MjSpec.from_string(_urdf_for_mujoco(robot))
     spec.modelname = robot.name
     spec.option.timestep = physics.timestep
@@ -311,7 +352,7 @@ def _build(robot: RobotModel, physics: PhysicsConfig, markers: tuple[_Marker, ..
             conaffinity=ARM_CONTYPE,
             group=2,
         )
-    for marker in markers:
+    for marker in scene.markers:
         body = world.add_body(name=f"armreach_marker_{marker.name}", mocap=True)
         body.add_geom(
             type=mujoco.mjtGeom.mjGEOM_SPHERE,
@@ -322,6 +363,29 @@ def _build(robot: RobotModel, physics: PhysicsConfig, markers: tuple[_Marker, ..
             group=2,
             mass=0.0,
         )
+
+    if scene.boxes:
+        spec.option.noslip_iterations = NOSLIP_ITERATIONS
+    for box in scene.boxes:  # after the gravity compensation above: bodies fall
+        body = world.add_body(name=BODY_PREFIX + box.name, pos=list(box.position))
+        if box.mass > 0:
+            body.add_freejoint(name=BODY_PREFIX + box.name)
+        body.add_geom(
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=list(box.half_extents),
+            rgba=list(box.rgba),
+            friction=[box.friction, 0.005, 0.0001],
+            contype=BODY_CONTYPE,
+            conaffinity=GROUND_CONTYPE | ARM_CONTYPE | BODY_CONTYPE,
+            group=2,
+            solref=[BODY_SOLREF_STEPS * physics.timestep, 1.0],
+            solmix=BODY_SOLMIX,
+            **({"mass": box.mass} if box.mass > 0 else {}),
+        )
+    for link, friction in scene.frictions:
+        link_body = spec.body(link)
+        for geom in link_body.geoms:
+            geom.friction = [friction, *list(geom.friction)[1:]]
 
     model = spec.compile()
     qpos = np.array([model.jnt_qposadr[model.joint(n).id] for n in robot.joint_names], dtype=np.intp)
@@ -347,12 +411,18 @@ def _build(robot: RobotModel, physics: PhysicsConfig, markers: tuple[_Marker, ..
         model.actuator_biasprm[act, 2] = -v
 
     bodies = {model.body(i).name: i for i in range(model.nbody)}
-    mocap = {m.name: int(model.body_mocapid[bodies[f"armreach_marker_{m.name}"]]) for m in markers}
-    return _Compiled(model=model, qpos=qpos, qvel=qvel, actuators=actuators, bodies=bodies, mocap=mocap)
+    mocap = {m.name: int(model.body_mocapid[bodies[f"armreach_marker_{m.name}"]]) for m in scene.markers}
+    free = {}
+    for box in scene.boxes:
+        if box.mass > 0:
+            joint = model.joint(BODY_PREFIX + box.name).id
+            free[box.name] = (int(model.jnt_qposadr[joint]), int(model.jnt_dofadr[joint]))
+    return _Compiled(model=model, qpos=qpos, qvel=qvel, actuators=actuators, bodies=bodies, mocap=mocap, free=free)
 
 
-def compiled_model(robot: RobotModel, physics: PhysicsConfig, markers: tuple[_Marker, ...] = ()) -> _Compiled:
-    """The compiled model for ``robot``, cached per (URDF file, mtime, physics, markers, gains)."""
+def compiled_model(robot: RobotModel, physics: PhysicsConfig, scene: _Scene | None = None) -> _Compiled:
+    """The compiled model for ``robot``, cached per (URDF file, mtime, physics, scene, gains)."""
+    scene = scene or _Scene()
     try:
         mtime = robot.urdf_path.stat().st_mtime_ns
     except OSError:
@@ -364,15 +434,16 @@ def compiled_model(robot: RobotModel, physics: PhysicsConfig, markers: tuple[_Ma
         tuple(robot.home.tolist()),
         robot.joint_names,
         physics,
-        markers,
+        scene,
         (POSITION_GAIN, SERVO_DAMPING, SERVO_GAIN_SCALE, ARMATURE, GRAVITY_COMPENSATION),
+        (NOSLIP_ITERATIONS, BODY_SOLREF_STEPS, BODY_SOLMIX),
     )
     with _cache_lock:
         hit = _cache.get(key)
         if hit is not None:
             _cache.move_to_end(key)
             return hit
-    compiled = _build(robot, physics, markers)
+    compiled = _build(robot, physics, scene)
     with _cache_lock:
         _cache[key] = compiled
         while len(_cache) > MODEL_CACHE_SIZE:
@@ -393,31 +464,36 @@ class MuJoCoBackend(Backend):
 
     def __init__(self, robot: RobotModel, physics: PhysicsConfig) -> None:
         super().__init__(robot, physics)
-        self._markers: tuple[_Marker, ...] = ()
+        self._scene = _Scene()
         self._renderer: Any = None
         self._renderer_size = (0, 0)
-        self._compiled_mocap_before: dict[str, int] = {}
         self._closed = False
         self._load(compiled_model(robot, physics))
 
     def _load(self, compiled: _Compiled) -> None:
-        old = getattr(self, "data", None)
+        old, before = getattr(self, "data", None), getattr(self, "_compiled", None)
         self._compiled = compiled
         self.model = compiled.model
         self.data = mujoco.MjData(self.model)
         self._qpos, self._qvel, self._act = compiled.qpos, compiled.qvel, compiled.actuators
-        if old is None:
+        if old is None or before is None:
             self.data.qpos[self._qpos] = self.robot.home
             self.data.ctrl[self._act] = self.robot.home
-        else:  # a marker was added: carry the state over (markers add no degrees of freedom)
-            self.data.qpos[:] = old.qpos
-            self.data.qvel[:] = old.qvel
-            self.data.ctrl[:] = old.ctrl
-            self.data.time = old.time
+        else:  # something was added to the scene: carry the state over, by name
+            data = self.data
+            data.qpos[self._qpos] = old.qpos[before.qpos]
+            data.qvel[self._qvel] = old.qvel[before.qvel]
+            data.ctrl[self._act] = old.ctrl[before.actuators]
+            data.time = old.time
+            for name, (qadr, vadr) in compiled.free.items():
+                if name in before.free:
+                    old_qadr, old_vadr = before.free[name]
+                    data.qpos[qadr : qadr + 7] = old.qpos[old_qadr : old_qadr + 7]
+                    data.qvel[vadr : vadr + 6] = old.qvel[old_vadr : old_vadr + 6]
             for name, index in compiled.mocap.items():
-                previous = self._compiled_mocap_before.get(name)
+                previous = before.mocap.get(name)
                 if previous is not None:
-                    self.data.mocap_pos[index] = old.mocap_pos[previous]
+                    data.mocap_pos[index] = old.mocap_pos[previous]
         mujoco.mj_forward(self.model, self.data)
         if self._renderer is not None:
             self._close_renderer()
@@ -473,12 +549,14 @@ class MuJoCoBackend(Backend):
     # -- markers and rendering -----------------------------------------------------------
     def add_marker(self, name: str, radius: float, rgba: tuple[float, float, float, float]) -> None:
         self._live()
-        if any(m.name == name for m in self._markers):
+        if any(m.name == name for m in self._scene.markers):
             raise ArmReachError(f"marker {name!r} already exists")
         marker = _Marker(name, float(radius), (float(rgba[0]), float(rgba[1]), float(rgba[2]), float(rgba[3])))
-        self._compiled_mocap_before = self._compiled.mocap
-        self._markers = (*self._markers, marker)
-        self._load(compiled_model(self.robot, self.physics, self._markers))
+        self._rebuild(replace(self._scene, markers=(*self._scene.markers, marker)))
+
+    def _rebuild(self, scene: _Scene) -> None:
+        self._load(compiled_model(self.robot, self.physics, scene))
+        self._scene = scene
 
     def set_marker(self, name: str, position: FloatArray) -> None:
         try:
@@ -486,6 +564,99 @@ class MuJoCoBackend(Backend):
         except KeyError:
             raise ArmReachError(f"marker {name!r} does not exist; add it first") from None
         self.data.mocap_pos[index] = position
+
+    # -- bodies, contacts, friction ---------------------------------------------------------
+    def add_box(
+        self,
+        name: str,
+        half_extents: tuple[float, float, float],
+        mass: float,
+        *,
+        friction: float = 1.0,
+        rgba: tuple[float, float, float, float] = (0.8, 0.3, 0.2, 1.0),
+        position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        self._live()
+        if name in self._compiled.bodies or any(b.name == name for b in self._scene.boxes):
+            raise ArmReachError(f"a body or link called {name!r} already exists")
+        box = _Box(
+            name,
+            (float(half_extents[0]), float(half_extents[1]), float(half_extents[2])),
+            float(mass),
+            float(friction),
+            (float(rgba[0]), float(rgba[1]), float(rgba[2]), float(rgba[3])),
+            (float(position[0]), float(position[1]), float(position[2])),
+        )
+        self._rebuild(replace(self._scene, boxes=(*self._scene.boxes, box)))
+
+    def free_bodies(self) -> tuple[str, ...]:
+        return tuple(self._compiled.free)
+
+    def _body_id(self, name: str) -> int:
+        """MuJoCo body of a robot link or an added body."""
+        bodies = self._compiled.bodies
+        if BODY_PREFIX + name in bodies:
+            return bodies[BODY_PREFIX + name]
+        if name in bodies and name in self.robot.link_names:
+            return bodies[name]
+        raise ArmReachError(f"{name!r} is neither a link of {self.robot.name!r} nor a body")
+
+    def _free(self, name: str) -> tuple[int, int]:
+        try:
+            return self._compiled.free[name]
+        except KeyError:
+            if any(b.name == name for b in self._scene.boxes):
+                raise ArmReachError(f"body {name!r} is fixed (mass 0); only free bodies can be moved") from None
+            raise ArmReachError(f"no body called {name!r}; add it with add_box first") from None
+
+    def set_body_pose(self, name: str, position: npt.ArrayLike, orientation: npt.ArrayLike = (1, 0, 0, 0)) -> None:
+        self._live()
+        qadr, vadr = self._free(name)
+        quat = np.asarray(orientation, dtype=np.float64)
+        data = self.data
+        data.qpos[qadr : qadr + 3] = np.asarray(position, dtype=np.float64)
+        data.qpos[qadr + 3 : qadr + 7] = quat / np.linalg.norm(quat)
+        data.qvel[vadr : vadr + 6] = 0.0
+        data.qacc_warmstart[:] = 0.0
+        mujoco.mj_forward(self.model, data)
+
+    def body_state(self, name: str) -> BodyState:
+        if BODY_PREFIX + name not in self._compiled.bodies:
+            raise ArmReachError(f"no body called {name!r}; add it with add_box first")
+        body = self._compiled.bodies[BODY_PREFIX + name]
+        data = self.data
+        position, orientation = data.xpos[body].copy(), data.xquat[body].copy()
+        if name not in self._compiled.free:
+            return BodyState(position, orientation, np.zeros(3), np.zeros(3))
+        _, vadr = self._compiled.free[name]
+        # a free joint's velocity: linear in the world frame, angular in the body's frame
+        linear = data.qvel[vadr : vadr + 3].copy()
+        angular = data.xmat[body].reshape(3, 3) @ data.qvel[vadr + 3 : vadr + 6]
+        return BodyState(position, orientation, linear, angular)
+
+    def contact_force(self, a: str, b: str) -> float:
+        pair = {self._body_id(a), self._body_id(b)}
+        model, data = self.model, self.data
+        total, wrench = 0.0, np.zeros(6)
+        geom_body = model.geom_bodyid
+        for i in range(data.ncon):
+            contact = data.contact[i]
+            if {int(geom_body[contact.geom1]), int(geom_body[contact.geom2])} == pair:
+                mujoco.mj_contactForce(model, data, i, wrench)
+                total += float(wrench[0])
+        return total
+
+    def set_friction(self, name: str, friction: float) -> None:
+        self._live()
+        boxes = self._scene.boxes
+        if any(b.name == name for b in boxes):
+            boxes = tuple(replace(b, friction=float(friction)) if b.name == name else b for b in boxes)
+            self._rebuild(replace(self._scene, boxes=boxes))
+            return
+        if name not in self.robot.link_names:
+            raise ArmReachError(f"{name!r} is neither a link of {self.robot.name!r} nor a body")
+        frictions = (*(f for f in self._scene.frictions if f[0] != name), (name, float(friction)))
+        self._rebuild(replace(self._scene, frictions=frictions))
 
     def render(self, camera: Camera) -> npt.NDArray[np.uint8]:
         self._live()

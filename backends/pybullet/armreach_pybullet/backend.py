@@ -17,13 +17,15 @@ from collections.abc import Iterator
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.backend import Backend, Camera, PhysicsConfig
+from armreach_core.backend import Backend, BodyState, Camera, PhysicsConfig
 from armreach_core.errors import ArmReachError, URDFError
 from armreach_core.robot import FloatArray, RobotModel
 
 POSITION_GAIN = 0.2
 VELOCITY_GAIN = 1.0
 GROUND_RGBA = (0.86, 0.87, 0.89, 1.0)
+#: Where a body waits while its contact points are dropped (m), far from everything.
+PARKING = (0.0, 0.0, 1.0e4)
 
 log = logging.getLogger("armreach.pybullet")
 _libc = ctypes.CDLL(None)
@@ -88,6 +90,8 @@ class PyBulletBackend(Backend):
         if self._client < 0:
             raise ArmReachError("PyBullet could not start a DIRECT client")
         self._markers: dict[str, int] = {}
+        self._bodies: dict[str, int] = {}
+        self._free: list[str] = []
         try:
             self._build()
         except BaseException:
@@ -197,10 +201,89 @@ class PyBulletBackend(Backend):
             _qd = [s[1] for s in states]
             _ee = pb.getLinkState(body, ee, computeForwardKinematics=True, physicsClientId=cid)[4]
 
+    # -- bodies, contacts, friction ---------------------------------------------------------
+    def add_box(
+        self,
+        name: str,
+        half_extents: tuple[float, float, float],
+        mass: float,
+        *,
+        friction: float = 1.0,
+        rgba: tuple[float, float, float, float] = (0.8, 0.3, 0.2, 1.0),
+        position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        cid = self._client
+        if name in self._bodies or name in self._link_index:
+            raise ArmReachError(f"a body or link called {name!r} already exists")
+
+        extents = [float(h) for h in half_extents]
+        shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=extents, physicsClientId=cid)
+        visual = pb.createVisualShape(pb.GEOM_BOX, halfExtents=extents, rgbaColor=list(rgba), physicsClientId=cid)
+        body = pb.createMultiBody(
+            baseMass=float(mass),
+            baseCollisionShapeIndex=shape,
+            baseVisualShapeIndex=visual,
+            basePosition=[float(p) for p in position],
+            physicsClientId=cid,
+        )
+        self._bodies[name] = body
+        if mass > 0:
+            self._free.append(name)
+        self.set_friction(name, friction)
+
+    def free_bodies(self) -> tuple[str, ...]:
+        return tuple(self._free)
+
+    def _body_id(self, name: str) -> int:
+        try:
+            return self._bodies[name]
+        except KeyError:
+            raise ArmReachError(f"no body called {name!r}; add it with add_box first") from None
+
+    def _shape(self, name: str) -> tuple[int, int]:
+        """(PyBullet body, link index) of a robot link or a body."""
+        if name in self._bodies:
+            return self._bodies[name], -1
+        if name in self._link_index:
+            return self._body, self._link_index[name]
+        raise ArmReachError(f"{name!r} is neither a link of {self.robot.name!r} nor a body")
+
+    def set_body_pose(self, name: str, position: npt.ArrayLike, orientation: npt.ArrayLike = (1, 0, 0, 0)) -> None:
+        body, cid = self._body_id(name), self._client
+        if name not in self._free:
+            raise ArmReachError(f"body {name!r} is fixed (mass 0); only free bodies can be moved")
+        w, x, y, z = (float(v) for v in np.asarray(orientation, dtype=np.float64))
+        pos = [float(v) for v in np.asarray(position, dtype=np.float64)]
+        # Bullet keeps a body's contact points, and their impulses that warm-start the solver,
+        # across a teleport, so the next step would depend on the past: park the body far from
+        # everything and run collision detection, which drops them, then place it.
+        pb.resetBasePositionAndOrientation(body, PARKING, [0.0, 0.0, 0.0, 1.0], physicsClientId=cid)
+        pb.performCollisionDetection(physicsClientId=cid)
+        pb.resetBasePositionAndOrientation(body, pos, [x, y, z, w], physicsClientId=cid)
+        pb.resetBaseVelocity(body, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=cid)
+
+    def body_state(self, name: str) -> BodyState:
+        body, cid = self._body_id(name), self._client
+        pos, (x, y, z, w) = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
+        lin, ang = pb.getBaseVelocity(body, physicsClientId=cid)
+        return BodyState(np.array(pos), np.array([w, x, y, z]), np.array(lin), np.array(ang))
+
+    def contact_force(self, a: str, b: str) -> float:
+        (body_a, link_a), (body_b, link_b) = self._shape(a), self._shape(b)
+        points = pb.getContactPoints(
+            bodyA=body_a, bodyB=body_b, linkIndexA=link_a, linkIndexB=link_b, physicsClientId=self._client
+        )
+        return float(sum(point[9] for point in points))
+
+    def set_friction(self, name: str, friction: float) -> None:
+        body, link = self._shape(name)
+        pb.changeDynamics(body, link, lateralFriction=float(friction), physicsClientId=self._client)
+
     # -- markers and rendering -----------------------------------------------------------
     def add_marker(self, name: str, radius: float, rgba: tuple[float, float, float, float]) -> None:
         if name in self._markers:
             raise ArmReachError(f"marker {name!r} already exists")
+
         visual = pb.createVisualShape(pb.GEOM_SPHERE, radius=radius, rgbaColor=rgba, physicsClientId=self._client)
         self._markers[name] = pb.createMultiBody(
             baseMass=0.0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=visual, physicsClientId=self._client

@@ -1,0 +1,1 @@
+"""Robot descriptions shipped with armreach-grasp (found with ``importlib.resources``)."""

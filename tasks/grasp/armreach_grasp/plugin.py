@@ -1,0 +1,53 @@
+"""The plugin armreach loads from the ``armreach`` entry-point group: the grasp task and its robot."""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+from armreach_core import RobotSpec, TaskSpec, hookimpl
+from armreach_core.specs import Register
+
+ROBOT = "ar6-gripper"
+#: ar6's home pose, fingers open (40 mm each).
+HOME = (0.0, -1.5707963267948966, 1.5707963267948966, -1.5707963267948966, -1.5707963267948966, 0.0, 0.04, 0.04)
+
+
+def gripper_urdf() -> Path:
+    """The bundled URDF of ar6 with its parallel gripper."""
+    return Path(str(resources.files("armreach_grasp.assets").joinpath("ar6_gripper", "ar6_gripper.urdf")))
+
+
+def _grasp_task() -> type:
+    from armreach_grasp.task import GraspTask
+
+    return GraspTask
+
+
+@hookimpl
+def armreach_register_tasks(register: Register) -> None:
+    register(
+        TaskSpec(
+            name="grasp",
+            env_id="armreach/Grasp-v0",
+            load=_grasp_task,
+            robot=ROBOT,
+            defaults={"max_episode_steps": 100},
+            entry_point="armreach_grasp.env:ArmGraspEnv",
+            description="pick a cube from a table with a parallel gripper and lift it 10 cm",
+        )
+    )
+
+
+@hookimpl
+def armreach_register_robots(register: Register) -> None:
+    register(
+        RobotSpec(
+            name=ROBOT,
+            urdf=gripper_urdf(),
+            ee_link="tcp",
+            home=HOME,
+            tool_joints=("left_finger_joint", "right_finger_joint"),
+            description="ar6 with a parallel two-finger gripper (prismatic fingers; bundled with armreach-grasp)",
+        )
+    )

@@ -1,0 +1,1 @@
+"""A copy-me armreach task plugin (see tasks/template/README.md)."""

@@ -1,0 +1,26 @@
+"""The one hook armreach calls: register the task (and, if you ship one, a robot)."""
+
+from __future__ import annotations
+
+from armreach_core import TaskSpec, hookimpl
+from armreach_core.specs import Register
+
+
+def _load() -> type:
+    from armreach_mytask.task import MyTask  # imported only when the env is made
+
+    return MyTask
+
+
+@hookimpl
+def armreach_register_tasks(register: Register) -> None:
+    register(
+        TaskSpec(
+            name="mytask",
+            env_id="armreach/MyTask-v0",
+            load=_load,
+            robot="ar6",  # a registered robot; register your own with armreach_register_robots
+            defaults={"max_episode_steps": 200},
+            description="move the end effector to a point above the ground and hold it there",
+        )
+    )

@@ -1,0 +1,98 @@
+"""Move the end effector to a point and hold it there (a copy-me template).
+
+Description:
+    The end effector must stay within ``threshold`` of a point ``height`` above a spot
+    drawn on the ground in front of the arm.
+
+Randomizations:
+    The spot, uniform in ``spot_range`` (m), drawn with the env's generator.
+
+Success:
+    ``distance < threshold``; the episode then terminates.
+
+Reward:
+    ``r = -distance`` (m).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from gymnasium import spaces
+
+from armreach_core import ConfigError, Task
+from armreach_core.backend import ArmState
+from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.task import Evaluation, Scene
+
+MARKER = "point"
+BOUND = 2.0  # m, on positions in the observation
+
+
+class MyTask(Task):
+    """Options are keyword arguments of the env: ``gym.make("armreach/MyTask-v0", height=0.3)``.
+
+    Args:
+        height: height of the point above the ground (m), default 0.3.
+        threshold: success distance (m), default 0.05.
+        spot_range: ``((x_min, y_min), (x_max, y_max))`` of the spot (m).
+    """
+
+    name = "mytask"
+
+    def __init__(
+        self,
+        robot: RobotModel,
+        *,
+        height: float = 0.3,
+        threshold: float = 0.05,
+        spot_range: tuple[tuple[float, float], tuple[float, float]] = ((0.3, -0.3), (0.6, 0.3)),
+    ) -> None:
+        super().__init__(robot)
+        if not threshold > 0:
+            raise ConfigError(f"threshold={threshold!r} must be a positive distance (m)")
+        self.height, self.threshold = float(height), float(threshold)
+        self.low, self.high = np.asarray(spot_range, dtype=np.float64)
+        self.point: FloatArray = np.array([*(self.low + self.high) / 2, self.height])
+        vel = 2.0 * robot.velocity_limits
+        box = np.full(3, BOUND)
+        self._low = np.concatenate([robot.lower, -vel, -box, -box]).astype(np.float32)
+        self._high = np.concatenate([robot.upper, vel, box, box]).astype(np.float32)
+
+    def observation_space(self) -> spaces.Space[Any]:
+        return spaces.Box(self._low, self._high, dtype=np.float32)
+
+    # Override action_size() and joint_targets() to map actions differently (the grasp task
+    # adds a gripper command); the default is one relative joint step per actuated joint.
+
+    def setup_scene(self, scene: Scene) -> None:
+        scene.add_marker(MARKER, self.threshold, (0.2, 0.4, 0.9, 0.6))  # bodies: scene.add_box(...)
+
+    def initialize_episode(self, scene: Scene, rng: np.random.Generator) -> None:
+        self.point = np.array([*rng.uniform(self.low, self.high), self.height])
+        scene.set_marker(MARKER, self.point)
+
+    def observation(self, state: ArmState) -> Any:
+        flat = np.concatenate([state.q, state.qd, state.ee_pos, self.point])
+        return np.clip(flat, self._low, self._high).astype(np.float32)
+
+    def evaluate(self, state: ArmState) -> Evaluation:
+        achieved, desired = state.ee_pos.astype(np.float32), self.point.astype(np.float32)
+        distance = float(np.linalg.norm(achieved - desired))
+        success = bool(self.compute_terminated(achieved, desired, None))
+        info = {"distance": distance, "is_success": success}
+        return Evaluation(reward=float(self.compute_reward(achieved, desired, None)), success=success, info=info)
+
+    # Pure functions of goals, shape (3,) or (batch, 3): HER relabels with them.
+    def compute_reward(
+        self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any
+    ) -> npt.NDArray[np.float64]:
+        diff = np.asarray(achieved_goal, dtype=np.float64) - np.asarray(desired_goal, dtype=np.float64)
+        return np.asarray(-np.linalg.norm(diff, axis=-1))
+
+    def compute_terminated(
+        self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any
+    ) -> npt.NDArray[np.bool_]:
+        return np.asarray(-self.compute_reward(achieved_goal, desired_goal, info) < self.threshold)
