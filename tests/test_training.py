@@ -243,3 +243,11 @@ def test_run_files_are_readable_like_any_other_file(tmp_path: Path) -> None:
     finally:
         os.umask(mask)
     assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o644
+
+
+def test_run_seeds_give_disjoint_env_seeds() -> None:
+    from armreach_core.rl.train import _seed_base
+
+    seeds = [set(range(_seed_base(s), _seed_base(s) + 64)) for s in range(20)]
+    assert all(a.isdisjoint(b) for i, a in enumerate(seeds) for b in seeds[i + 1 :])
+    assert all(min(s) >= 10_100 for s in seeds)  # clear of the evaluation seeds 10000 + i

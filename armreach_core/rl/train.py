@@ -359,6 +359,7 @@ def train(
             model.tensorboard_log = str(run_dir / "tb")
         else:
             model = build_model(algo, settings, env, int(config["seed"]), run_dir / "tb", config.get("device", "auto"))
+            env.seed(_seed_base(int(config["seed"])))  # SB3 seeded the envs with the run seed itself; spread them
         # Written once the model exists, so that a folder with a config always has something to resume
         # or is safe to start over (see runs.new_run_dir).
         runs.write_yaml(run_dir / runs.CONFIG, config)
