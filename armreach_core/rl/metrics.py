@@ -96,6 +96,8 @@ class MeanStd:
     def fmt(self, digits: int = 2) -> str:
         if self.n == 0:
             return "n/a"
+        if self.n == 1:
+            return f"{self.mean:.{digits}f}"
         return f"{self.mean:.{digits}f} ± {self.std:.{digits}f}"
 
 

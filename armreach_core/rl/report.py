@@ -27,7 +27,7 @@ def _paper(label: str, key: str) -> str:
 
 
 def _pct(stat: MeanStd) -> str:
-    return "n/a" if stat.n == 0 else f"{stat.mean:.0f} ± {stat.std:.0f}"
+    return stat.fmt(0)
 
 
 def write_report(
@@ -92,7 +92,7 @@ def write_report(
         )
     lines.append(
         f"| DLS inverse kinematics (reference) | – | {100 * ik_summary['success_rate']:.0f} | – | "
-        f"{MeanStd(ik_summary['steps_to_goal_mean'], ik_summary['steps_to_goal_std'], 1).fmt(1)} |"
+        f"{ik_summary['steps_to_goal_mean']:.1f} ± {ik_summary['steps_to_goal_std']:.1f} (over episodes) |"
     )
     lines += [
         "",
@@ -113,7 +113,7 @@ def write_report(
         )
     lines.append(
         f"| DLS inverse kinematics (reference) | – / {100 * ik_summary['success_rate']:.0f} | – / – | "
-        f"– / {MeanStd(ik_summary['jerk_mean'], ik_summary['jerk_std'], 1).fmt(2)} | "
+        f"– / {ik_summary['jerk_mean']:.2f} ± {ik_summary['jerk_std']:.2f} (over episodes) | "
         f"{ik_summary['final_reward_mean']:.2f} |"
     )
     lines += ["", "## Figures", ""]
