@@ -197,10 +197,13 @@ def save_evaluation(evaluation: Evaluation, out: Path) -> dict[str, Any]:
 
 def format_summary(summary: dict[str, Any]) -> str:
     sr = summary["success_rate"]
-    stg = MeanStd(summary["steps_to_goal_mean"], summary["steps_to_goal_std"], 1 if sr > 0 else 0)
-    jk = MeanStd(summary["jerk_mean"], summary["jerk_std"], 1 if sr > 0 else 0)
+
+    def spread(mean: float, std: float, digits: int) -> str:
+        return "n/a" if sr == 0 else f"{mean:.{digits}f} ± {std:.{digits}f}"
+
     return (
         f"{summary['backend']}: success {100 * sr:.0f}% of {summary['episodes']} episodes; "
-        f"steps to goal {stg.fmt(1)}; final reward {summary['final_reward_mean']:.2f}; "
-        f"jerk {jk.fmt(2)} rad/s³; {summary['seconds']:.1f} s"
+        f"steps to goal {spread(summary['steps_to_goal_mean'], summary['steps_to_goal_std'], 1)}; "
+        f"final reward {summary['final_reward_mean']:.2f}; "
+        f"jerk {spread(summary['jerk_mean'], summary['jerk_std'], 2)} rad/s³; {summary['seconds']:.1f} s"
     )
