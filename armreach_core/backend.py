@@ -127,6 +127,14 @@ class Backend(ABC):
     def close(self) -> None:
         """Release the engine. Safe to call more than once."""
 
+    def diverged(self) -> bool:
+        """Whether the last :meth:`step` went numerically unstable and the engine repaired it.
+
+        Engines that let NaN through need not override this (the env checks the state);
+        MuJoCo resets its state on a diverging step, so its backend reports that here.
+        """
+        return False
+
     def read_state(self) -> ArmState:
         """Joint state and end-effector position in one call (backends may batch the reads)."""
         q, qd = self.joint_state()

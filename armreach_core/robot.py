@@ -72,6 +72,8 @@ class RobotModel:
         urdf: path to the URDF file.
         ee_link: the end-effector link; by default the tip of the serial chain.
         home: initial joint configuration (rad); by default zero, moved inside the limits.
+        allow_external_meshes: accept meshes outside the URDF's folder or package (see
+            :func:`armreach_core.urdf.read_urdf`; default: ``ARMREACH_ALLOW_EXTERNAL_MESHES``).
 
     Raises:
         URDFError: the file cannot be used, with the reason and the fix.
@@ -82,8 +84,10 @@ class RobotModel:
         urdf: str | os.PathLike[str],
         ee_link: str | None = None,
         home: npt.ArrayLike | None = None,
+        *,
+        allow_external_meshes: bool | None = None,
     ) -> None:
-        parsed = read_urdf(urdf)
+        parsed = read_urdf(urdf, allow_external_meshes=allow_external_meshes)
         self.parsed: ParsedURDF = parsed
         self.urdf_path: Path = parsed.path
         robot = parsed.model.robot

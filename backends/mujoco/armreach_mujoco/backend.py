@@ -127,6 +127,13 @@ NATIVE_MESHES = (".stl", ".obj", ".msh")
 #: too when self-collision is on.
 ARM_CONTYPE, GROUND_CONTYPE = 2, 1
 MODEL_CACHE_SIZE = 32
+#: MuJoCo warnings raised when a step diverges (it then resets the state to the model's defaults).
+_INSTABILITY_WARNINGS = (
+    mujoco.mjtWarning.mjWARN_BADQACC,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+    mujoco.mjtWarning.mjWARN_BADCTRL,
+)
 
 log = logging.getLogger("armreach.mujoco")
 
@@ -233,7 +240,12 @@ def _links_without_inertial(robot: RobotModel) -> list[str]:
 
 
 def _build(robot: RobotModel, physics: PhysicsConfig, markers: tuple[_Marker, ...]) -> _Compiled:
-    spec = mujoco.MjSpec.from_string(_urdf_for_mujoco(robot))
+    try:
+        spec = mujoco.MjSpec.from_string(_urdf_for_mujoco(robot))
+    except ValueError as exc:  # MuJoCo's URDF importer refused the file
+        raise URDFError(
+            f"MuJoCo cannot read {robot.urdf_path}: {' '.join(str(exc).split())}; fix the element it names"
+        ) from None
     spec.modelname = robot.name
     spec.option.timestep = physics.timestep
     spec.option.gravity = list(physics.gravity)
@@ -323,7 +335,12 @@ def _build(robot: RobotModel, physics: PhysicsConfig, markers: tuple[_Marker, ..
             mass=0.0,
         )
 
-    model = spec.compile()
+    try:
+        model = spec.compile()
+    except ValueError as exc:  # e.g. an inertia MuJoCo rejects; the message names the body
+        raise URDFError(
+            f"MuJoCo cannot compile {robot.urdf_path}: {' '.join(str(exc).split())}; fix the element it names"
+        ) from None
     qpos = np.array([model.jnt_qposadr[model.joint(n).id] for n in robot.joint_names], dtype=np.intp)
     qvel = np.array([model.jnt_dofadr[model.joint(n).id] for n in robot.joint_names], dtype=np.intp)
     actuators = np.array([model.actuator(n).id for n in robot.joint_names], dtype=np.intp)
@@ -398,6 +415,7 @@ class MuJoCoBackend(Backend):
         self._renderer_size = (0, 0)
         self._compiled_mocap_before: dict[str, int] = {}
         self._closed = False
+        self._diverged = False
         self._load(compiled_model(robot, physics))
 
     def _load(self, compiled: _Compiled) -> None:
@@ -436,14 +454,24 @@ class MuJoCoBackend(Backend):
         data.qacc_warmstart[:] = 0.0
         data.ctrl[self._act] = values
         mujoco.mj_forward(self.model, data)
+        self._diverged = False
 
     def set_joint_targets(self, q: FloatArray) -> None:
         self.data.ctrl[self._act] = q
 
     def step(self) -> None:
+        # A diverging step makes MuJoCo reset mjData (warning counters included) and then
+        # count the warning that caused it: zero the counters, step, and look.
+        warnings = self.data.warning
+        for kind in _INSTABILITY_WARNINGS:
+            warnings[kind].number = 0
         mujoco.mj_step(self.model, self.data, nstep=self.physics.substeps)
+        self._diverged = any(warnings[kind].number > 0 for kind in _INSTABILITY_WARNINGS)
         # mj_step leaves xpos at the pose before its last integration: bring links up to qpos
         mujoco.mj_kinematics(self.model, self.data)
+
+    def diverged(self) -> bool:
+        return self._diverged
 
     # -- state -------------------------------------------------------------------------
     def joint_state(self) -> tuple[FloatArray, FloatArray]:
