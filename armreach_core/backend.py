@@ -127,6 +127,11 @@ class Backend(ABC):
     def close(self) -> None:
         """Release the engine. Safe to call more than once."""
 
+    @classmethod
+    def live_clients(cls) -> int | None:
+        """Engine connections open in this process (for leak checks), or ``None`` if the engine has none."""
+        return None
+
     def diverged(self) -> bool:
         """Whether the last :meth:`step` went numerically unstable and the engine repaired it.
 

@@ -6,10 +6,10 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from armreach_core.cli import evaluate, experiment, parity, plugins, rollout, train
+from armreach_core.cli import evaluate, experiment, parity, plugins, rollout, soak, train
 from armreach_core.errors import ArmReachError
 
-COMMANDS = (train, evaluate, experiment, rollout, parity, plugins)
+COMMANDS = (train, evaluate, experiment, rollout, parity, plugins, soak)
 
 
 def build_parser() -> argparse.ArgumentParser:
