@@ -46,7 +46,10 @@ def load_robot(
 ) -> RobotModel:
     """A :class:`RobotModel`, cached per (file, modification time, ee_link, home, mesh rule)."""
     path = Path(urdf).expanduser()
-    mtime = path.stat().st_mtime if path.is_file() else -1.0
+    try:
+        mtime = path.stat().st_mtime if path.is_file() else -1.0
+    except (OSError, ValueError):  # a name too long to look up: RobotModel says it is not found
+        mtime = -1.0
     home_key = None if home is None else tuple(float(v) for v in np.asarray(home, dtype=np.float64).ravel())
     external = allow_external_meshes_default() if allow_external_meshes is None else bool(allow_external_meshes)
     if mtime < 0:

@@ -82,6 +82,14 @@ def mesh_roots(urdf_dir: Path, package: str | None = None) -> list[Path]:
     return list(dict.fromkeys(roots))
 
 
+def _is_file(path: Path) -> bool:
+    """``path.is_file()``, False for names the system cannot even look up (too long, NUL bytes)."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
+
+
 def _inside(path: Path, roots: list[Path]) -> bool:
     return any(path == root or path.is_relative_to(root) for root in roots)
 
@@ -103,7 +111,7 @@ def _find(filename: str, urdf_dir: Path, allow_external: bool, what: str) -> tup
     roots = mesh_roots(urdf_dir, package)
     outside: Path | None = None
     for candidate in candidates:
-        if candidate.is_file():
+        if _is_file(candidate):
             real = candidate.resolve()
             if allow_external or _inside(real, roots):
                 return real, candidates
@@ -159,7 +167,7 @@ def read_urdf(path: str | os.PathLike[str], *, allow_external_meshes: bool | Non
     if allow_external_meshes is None:
         allow_external_meshes = allow_external_meshes_default()
     urdf_path = Path(path).expanduser()
-    if not urdf_path.is_file():
+    if not _is_file(urdf_path):
         raise URDFError(f"URDF file not found: {str(urdf_path)!r}; pass the path of an existing .urdf file")
     size = urdf_path.stat().st_size
     if size > MAX_URDF_BYTES:

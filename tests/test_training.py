@@ -177,3 +177,92 @@ def test_atomic_write_keeps_the_old_file_when_the_writer_fails(tmp_path: Path) -
         runs.atomic_save(path, fail)
     assert path.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["f.txt"]
+
+
+def _assert_run_readable(run_dir: Path) -> int:
+    """Every file of a (possibly killed) off-policy run folder reads back; returns the checkpoint's step count."""
+    from stable_baselines3 import DDPG
+
+    config = runs.read_config(run_dir)
+    assert config["algo"] == "ddpg"
+    assert "train" in (run_dir / "command.txt").read_text(encoding="utf-8")
+    assert "versions" in json.loads((run_dir / "environment.json").read_text(encoding="utf-8"))
+    progress = json.loads((run_dir / "checkpoint.json").read_text(encoding="utf-8"))
+    model = DDPG.load(run_dir / "checkpoint.zip", device="cpu")
+    # written in the order replay buffer, model, step count: the count never runs ahead of the model
+    assert 0 < progress["timesteps"] <= model.num_timesteps
+    if (run_dir / "checkpoint_replay.pkl").exists():
+        model.load_replay_buffer(run_dir / "checkpoint_replay.pkl")
+        assert model.replay_buffer.size() > 0
+    for path in sorted((run_dir / "monitor").glob("*.monitor.csv")):
+        lines = path.read_text(encoding="utf-8").splitlines()
+        assert lines[0].startswith("#") and json.loads(lines[0][1:])
+        rows = list(csv.DictReader(lines[1:]))
+        assert all(len(row) == len(rows[0]) and None not in row.values() for row in rows)
+        assert all(np.isfinite(float(row["r"])) and int(row["l"]) > 0 for row in rows)
+    return int(model.num_timesteps)
+
+
+def _start_training(run_dir: Path, preset: str, *extra: str) -> subprocess.Popen[str]:
+    cmd = [sys.executable, "-m", "armreach_core.cli", "train"]
+    args = ["--resume", str(run_dir)] if "--resume" in extra else ["--algo", "ddpg", "--preset", preset]
+    args += ["--out", str(run_dir)] if "--resume" not in extra else []
+    rest = [e for e in extra if e != "--resume"]
+    return subprocess.Popen(
+        [*cmd, *args, *rest], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=os.environ.copy()
+    )
+
+
+def _wait_for(path: Path, proc: subprocess.Popen[str], timeout: float = 90.0) -> None:
+    deadline = time.time() + timeout
+    while not path.exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    assert path.exists(), proc.stderr.read() if proc.poll() is not None and proc.stderr else "timed out"
+
+
+def test_sigkill_keeps_every_file_readable_and_resume_continues(tmp_path: Path, tiny: str) -> None:
+    run_dir = tmp_path / "run"
+    proc = _start_training(run_dir, tiny, "--steps", "100000")
+    _wait_for(run_dir / "checkpoint.json", proc)
+    time.sleep(0.7)  # into the next checkpoints (every 100 steps): the kill may land inside a write
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert proc.returncode == -signal.SIGKILL
+    stopped_at = _assert_run_readable(run_dir)
+    rows_before = _monitor_rows(run_dir)
+    leftovers = [p for p in run_dir.iterdir() if p.name.startswith(".")]
+
+    assert main(["train", "--resume", str(run_dir), "--steps", str(stopped_at + 120)]) == 0
+    assert json.loads((run_dir / "checkpoint.json").read_text())["timesteps"] == stopped_at + 120
+    assert _assert_run_readable(run_dir) == stopped_at + 120
+    assert _monitor_rows(run_dir)[: len(rows_before)] == rows_before  # no episode lost
+    assert not [p for p in leftovers if p.exists()], "resume removes what the killed writer left"
+    assert (run_dir / "model.zip").is_file()
+
+
+@pytest.mark.slow
+def test_repeated_sigkills_at_random_moments_lose_nothing(tmp_path: Path) -> None:
+    """Kill, check, resume, kill again... with checkpoints every 10 steps, so many kills land inside writes."""
+    preset = tmp_path / "often.yaml"
+    preset.write_text(TINY.replace("checkpoint_every: 100", "checkpoint_every: 10"))
+    run_dir = tmp_path / "run"
+    rng = np.random.default_rng(7)
+    proc = _start_training(run_dir, str(preset), "--steps", "100000")
+    _wait_for(run_dir / "checkpoint.json", proc)
+    steps, rows = 0, []
+    for kill in range(8):
+        time.sleep(float(rng.uniform(0.0, 3.0)))
+        proc.kill()
+        proc.communicate(timeout=60)
+        now = _assert_run_readable(run_dir)
+        assert now >= steps, f"kill {kill}: the checkpoint went back from {steps} to {now} steps"
+        current_rows = _monitor_rows(run_dir)
+        assert current_rows[: len(rows)] == rows, f"kill {kill}: monitor rows were lost"
+        steps, rows = now, current_rows
+        proc = _start_training(run_dir, "", "--resume")
+        time.sleep(2.0)  # let it load and start writing again
+    proc.kill()
+    proc.communicate(timeout=60)
+    final = _assert_run_readable(run_dir)
+    assert main(["train", "--resume", str(run_dir), "--steps", str(final + 20)]) == 0
+    assert _assert_run_readable(run_dir) == final + 20

@@ -181,3 +181,12 @@ def test_a_file_over_the_size_limit_fails_fast(tmp_path, monkeypatch):
     path = _write(tmp_path, LINK.format("a") + LINK.format("b") + JOINT.format("j", "a", "b") + " " * 4096)
     with pytest.raises(URDFError, match="over the 4096-byte limit"):
         RobotModel(path)
+
+
+def test_names_too_long_to_look_up_are_urdf_errors(tmp_path):
+    """Found by fuzzing: a 300-character mesh name made the file lookup raise OSError."""
+    body = '<link name="a"><visual><geometry><mesh filename="' + "m" * 300 + '.stl"/></geometry></visual></link>'
+    with pytest.raises(URDFError, match="not found"):
+        RobotModel(_write(tmp_path, body + LINK.format("b") + JOINT.format("j", "a", "b")))
+    with pytest.raises(URDFError, match="not found"):
+        armreach_core.ArmReach6DOFEnv(urdf=tmp_path / ("u" * 300 + ".urdf"))

@@ -23,6 +23,7 @@ import datetime as _dt
 import json
 import os
 import platform
+import re
 import shlex
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
@@ -64,6 +65,20 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
         os.replace(tmp_path, final)
     finally:
         tmp_path.unlink(missing_ok=True)
+
+
+#: Names :func:`atomic_path` and :func:`atomic_save` give their temporary files.
+_TEMPORARY = re.compile(r"^\..+\.[a-z0-9_]{8}\.(tmp|zip|pkl)$")
+
+
+def remove_temporaries(run_dir: str | os.PathLike[str]) -> list[Path]:
+    """Delete temporary files a killed writer left in ``run_dir``; returns what was removed."""
+    removed = []
+    for path in Path(run_dir).iterdir():
+        if path.is_file() and _TEMPORARY.match(path.name):
+            path.unlink(missing_ok=True)
+            removed.append(path)
+    return removed
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:

@@ -224,6 +224,7 @@ def train(
         runs.new_run_dir(run_dir)
         runs.write_yaml(run_dir / runs.CONFIG, config)
     else:
+        runs.remove_temporaries(run_dir)  # half-written files of a run that was killed
         runs.write_yaml(run_dir / runs.CONFIG, config)  # --steps may have extended the total
     runs.record_command(run_dir, command or ["python:", "armreach_core.rl.train.train", str(run_dir)])
     runs.write_json(run_dir / runs.ENVIRONMENT, runs.environment_record())
