@@ -138,6 +138,16 @@ _INSTABILITY_WARNINGS = (
 log = logging.getLogger("armreach.mujoco")
 
 
+def _log_warning(message: Any) -> None:
+    log.warning("mujoco: %s", str(message).strip())
+
+
+# MuJoCo's default warning handler prints and appends to MUJOCO_LOG.TXT in the current
+# folder; a diverging step (reported through Backend.diverged) would litter users' folders.
+if mujoco.get_mju_user_warning() is None:
+    mujoco.set_mju_user_warning(_log_warning)
+
+
 @dataclass(frozen=True)
 class _Marker:
     name: str
