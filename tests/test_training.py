@@ -266,3 +266,47 @@ def test_repeated_sigkills_at_random_moments_lose_nothing(tmp_path: Path) -> Non
     final = _assert_run_readable(run_dir)
     assert main(["train", "--resume", str(run_dir), "--steps", str(final + 20)]) == 0
     assert _assert_run_readable(run_dir) == final + 20
+
+
+def _untrained_run(run_dir: Path, preset: str) -> Path:
+    """A ddpg run folder with a (junk) checkpoint and model, made without training."""
+    from armreach_core.rl.train import resolve_config
+
+    runs.new_run_dir(run_dir)
+    runs.write_yaml(run_dir / runs.CONFIG, resolve_config(algo="ddpg", preset=preset, steps=300))
+    for name in (runs.MODEL, runs.CHECKPOINT):
+        (run_dir / name).write_bytes(b"not a zip")
+    return run_dir
+
+
+@pytest.mark.skipif(not hasattr(os, "getuid"), reason="no user ids on this system")
+def test_runs_other_users_could_have_written_are_refused_unless_trusted(
+    tmp_path: Path, tiny: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run_dir = _untrained_run(tmp_path / "run", tiny)
+    runs.check_trusted(run_dir)  # ours, not writable by others
+    (run_dir / runs.MODEL).chmod(0o666)
+    with pytest.raises(ConfigError, match=r"model\.zip is not safe to trust, it is writable by every user.*--trust"):
+        runs.check_trusted(run_dir)
+    runs.check_trusted(run_dir, trust=True)
+    assert main(["evaluate", str(run_dir), "--episodes", "1"]) == 2
+    assert "refusing to load the run" in capsys.readouterr().err
+    assert main(["evaluate", str(run_dir), "--episodes", "1", "--trust"]) == 2
+    assert "damaged" in capsys.readouterr().err  # past the trust check, into the (junk) file
+    assert main(["train", "--resume", str(run_dir)]) == 2
+    assert "refusing to load the run" in capsys.readouterr().err
+    assert main(["train", "--resume", str(run_dir), "--trust"]) == 2
+    assert "damaged" in capsys.readouterr().err
+    (run_dir / runs.MODEL).chmod(0o644)
+    run_dir.chmod(0o777)
+    with pytest.raises(ConfigError, match="writable by every user"):
+        runs.check_trusted(run_dir)
+    run_dir.chmod(0o755)
+    if os.getuid() == 0:  # only root can give a file to someone else
+        os.chown(run_dir / runs.CHECKPOINT, 54321, -1)
+        with pytest.raises(ConfigError, match=r"checkpoint\.zip .* belongs to user id 54321"):
+            runs.check_trusted(run_dir)
+        os.chown(run_dir / runs.CHECKPOINT, 0, 54321)
+        (run_dir / runs.CHECKPOINT).chmod(0o664)
+        with pytest.raises(ConfigError, match="writable by group id 54321"):
+            runs.check_trusted(run_dir)

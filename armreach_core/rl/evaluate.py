@@ -128,10 +128,16 @@ def _average_trace(traces: list[npt.NDArray[np.float64]]) -> npt.NDArray[np.floa
     return np.asarray(total / np.maximum(count, 1), dtype=np.float64)
 
 
-def load_agent(run_dir: Path, config: dict[str, Any]) -> Agent:
-    """The run's controller: its trained model, or the IK reference."""
+def load_agent(run_dir: Path, config: dict[str, Any], *, trust: bool = False) -> Agent:
+    """The run's controller: its trained model, or the IK reference.
+
+    Raises:
+        ConfigError: no model, a damaged one, or a run folder not safe to unpickle from
+            (see :func:`armreach_core.rl.runs.check_trusted`; ``trust`` skips that check).
+    """
     if config["algo"] == "ik":
         return IKAgent(float(config["settings"].get("damping", 0.05)))
+    runs.check_trusted(run_dir, trust=trust)
     for name in (runs.MODEL, runs.CHECKPOINT):
         path = run_dir / name
         if path.is_file():
@@ -154,12 +160,16 @@ def evaluate_run(
     backend: str | None = None,
     seed: int = 10_000,
     max_episode_steps: int | None = None,
+    trust: bool = False,
 ) -> Evaluation:
-    """Evaluate a run folder on the paper's task (2048-step limit), optionally on another backend."""
+    """Evaluate a run folder on the paper's task (2048-step limit), optionally on another backend.
+
+    ``trust`` loads the model even from a folder another user owns or may write to.
+    """
     config = runs.read_config(run_dir)
     if max_episode_steps is not None:
         config["eval_max_episode_steps"] = max_episode_steps
-    agent = load_agent(run_dir, config)
+    agent = load_agent(run_dir, config, trust=trust)
     kwargs = env_kwargs(config, backend=backend, evaluation=True)
     return run_episodes(lambda: ArmEnv(**kwargs), agent, episodes, seed)
 

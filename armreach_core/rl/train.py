@@ -187,10 +187,11 @@ def read_progress(run_dir: Path) -> dict[str, Any]:
     return data
 
 
-def _load_checkpoint(config: dict[str, Any], run_dir: Path, env: Any) -> Any:
+def _load_checkpoint(config: dict[str, Any], run_dir: Path, env: Any, trust: bool) -> Any:
     path = run_dir / runs.CHECKPOINT
     if not path.is_file():
         raise ConfigError(f"{run_dir} has no {runs.CHECKPOINT} to resume from")
+    runs.check_trusted(run_dir, trust=trust)
     try:
         model = algo_class(config["algo"]).load(path, env=env, device=config.get("device", "auto"))
     except Exception as exc:  # a truncated or foreign zip: say which file and what to do
@@ -213,8 +214,13 @@ def train(
     resume: bool = False,
     stream: TextIO | None = sys.stderr,
     command: list[str] | None = None,
+    trust: bool = False,
 ) -> TrainResult:
-    """Train (or continue) the run in ``run_dir`` until ``config['timesteps']``."""
+    """Train (or continue) the run in ``run_dir`` until ``config['timesteps']``.
+
+    ``trust`` resumes even from a folder another user owns or may write to (its
+    checkpoint is a pickle: see :func:`armreach_core.rl.runs.check_trusted`).
+    """
     import torch
 
     algo = config["algo"]
@@ -224,6 +230,7 @@ def train(
         runs.new_run_dir(run_dir)
         runs.write_yaml(run_dir / runs.CONFIG, config)
     else:
+        runs.check_trusted(run_dir, trust=trust)  # before writing anything into it
         runs.remove_temporaries(run_dir)  # half-written files of a run that was killed
         runs.write_yaml(run_dir / runs.CONFIG, config)  # --steps may have extended the total
     runs.record_command(run_dir, command or ["python:", "armreach_core.rl.train.train", str(run_dir)])
@@ -236,7 +243,7 @@ def train(
     env = make_vec_env(config, run_dir, int(config["seed"]), int(config["n_envs"]), append=resume)
     try:
         if resume:
-            model = _load_checkpoint(config, run_dir, env)
+            model = _load_checkpoint(config, run_dir, env, trust)
             model.tensorboard_log = str(run_dir / "tb")
         else:
             model = build_model(algo, settings, env, int(config["seed"]), run_dir / "tb", config.get("device", "auto"))
