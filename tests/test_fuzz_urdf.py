@@ -24,6 +24,7 @@ import selectors
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -31,6 +32,7 @@ from typing import Any
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from hypothesis.configuration import set_hypothesis_home_dir
 from lxml import etree
 
 from armreach_core.bundled import asset_path
@@ -45,6 +47,8 @@ SOURCE = asset_path("ar6", "ar6.urdf").read_bytes()
 COUNTS: collections.Counter[str] = collections.Counter()
 
 pytestmark = pytest.mark.skipif(not BACKENDS, reason="no physics backend installed")
+# Hypothesis's own files (no example database is used) go to the temporary folder, not the checkout.
+set_hypothesis_home_dir(os.path.join(tempfile.gettempdir(), "armreach-hypothesis"))
 
 
 # -- the worker -----------------------------------------------------------------------------
