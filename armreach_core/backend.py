@@ -172,6 +172,19 @@ class Backend(ABC):
         """
         raise NotImplementedError(f"backend {self.name!r} has no bare loop for benchmarks")
 
+    @classmethod
+    def live_clients(cls) -> int | None:
+        """Engine connections open in this process (for leak checks), or ``None`` if the engine has none."""
+        return None
+
+    def diverged(self) -> bool:
+        """Whether the last :meth:`step` went numerically unstable and the engine repaired it.
+
+        Engines that let NaN through need not override this (the env checks the state);
+        MuJoCo resets its state on a diverging step, so its backend reports that here.
+        """
+        return False
+
     def read_state(self) -> ArmState:
         """Joint state, end-effector position and free bodies in one call (backends may batch the reads)."""
         q, qd = self.joint_state()

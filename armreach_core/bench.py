@@ -123,15 +123,22 @@ def bench_vector(backend: str, workers: int, steps: int) -> float:
         vec.close()
 
 
-def bench_sb3(backend: str, algo: str, steps: int) -> float:
-    """Env steps/s while training ``algo`` with the paper preset (after its warm-up)."""
+def bench_sb3(backend: str, algo: str, steps: int, threads: int | None = None) -> float:
+    """Env steps/s while training ``algo`` with the paper preset (after its warm-up).
+
+    ``threads``: torch CPU threads; default what ``armreach train`` uses (see
+    :func:`armreach_core.rl.train.configure_threads`).
+    """
     import tempfile
     from pathlib import Path
 
     from armreach_core.rl.agents import build_model, make_vec_env
-    from armreach_core.rl.train import resolve_config
+    from armreach_core.rl.train import configure_threads, resolve_config
 
     config = resolve_config(algo=algo, preset="paper", backend=backend)
+    if threads is not None:
+        config["settings"]["torch_threads"] = threads
+    configure_threads(config["settings"], "cpu")
     with tempfile.TemporaryDirectory() as tmp:
         env = make_vec_env(config, Path(tmp), 0, 1, append=False)
         try:

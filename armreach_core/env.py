@@ -23,15 +23,26 @@ from armreach_core.plugins import get_host
 from armreach_core.robot import RobotModel
 from armreach_core.specs import BackendSpec
 from armreach_core.task import Task
+from armreach_core.urdf import allow_external_meshes_default
 
 JOINT_LIMIT_MODES = ("clip", "terminate")
+#: Largest joint angle (rad or m), joint velocity (rad/s or m/s) or end-effector coordinate
+#: (m) taken as physics rather than a numerical blow-up.
+STATE_LIMIT = 1e6
+#: Action dtypes accepted: numbers that are real (bool, complex, text and objects are refused).
+_ACTION_KINDS = "iuf"
 
 
 @functools.lru_cache(maxsize=64)
 def _robot(
-    path: str, mtime: float, ee_link: str | None, home: tuple[float, ...] | None, tool_joints: tuple[str, ...]
+    path: str,
+    mtime: float,
+    ee_link: str | None,
+    home: tuple[float, ...] | None,
+    tool_joints: tuple[str, ...],
+    external: bool,
 ) -> RobotModel:
-    return RobotModel(path, ee_link=ee_link, home=home, tool_joints=tool_joints)
+    return RobotModel(path, ee_link=ee_link, home=home, tool_joints=tool_joints, allow_external_meshes=external)
 
 
 def load_robot(
@@ -39,15 +50,21 @@ def load_robot(
     ee_link: str | None = None,
     home: npt.ArrayLike | None = None,
     tool_joints: tuple[str, ...] = (),
+    *,
+    allow_external_meshes: bool | None = None,
 ) -> RobotModel:
-    """A :class:`RobotModel`, cached per (file, modification time, ee_link, home, tool_joints)."""
+    """A :class:`RobotModel`, cached per (file, modification time, ee_link, home, tool_joints, mesh rule)."""
     path = Path(urdf).expanduser()
-    mtime = path.stat().st_mtime if path.is_file() else -1.0
+    try:
+        mtime = path.stat().st_mtime if path.is_file() else -1.0
+    except (OSError, ValueError):  # a name too long to look up: RobotModel says it is not found
+        mtime = -1.0
     home_key = None if home is None else tuple(float(v) for v in np.asarray(home, dtype=np.float64).ravel())
     tools = tuple(str(name) for name in tool_joints)
-    if mtime < 0:
-        return RobotModel(path, ee_link=ee_link, home=home, tool_joints=tools)  # raises the URDFError
-    return _robot(str(path.resolve()), mtime, ee_link, home_key, tools)
+    external = allow_external_meshes_default() if allow_external_meshes is None else bool(allow_external_meshes)
+    if mtime < 0:  # raises the URDFError
+        return RobotModel(path, ee_link=ee_link, home=home, tool_joints=tools, allow_external_meshes=external)
+    return _robot(str(path.resolve()), mtime, ee_link, home_key, tools, external)
 
 
 def load_backend_class(name: str) -> type[Backend]:
@@ -93,6 +110,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         camera: a :class:`~armreach_core.backend.Camera` for rendering.
         tool_joints: joints off the arm's chain to actuate too (a gripper's fingers);
             default the registered robot's (none for a ``urdf``).
+        allow_external_meshes: let ``urdf`` use meshes outside its folder or ROS package
+            (default: the ``ARMREACH_ALLOW_EXTERNAL_MESHES`` environment variable, else no).
         **task_options: passed to the task.
     """
 
@@ -117,6 +136,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         inertia_from_file: bool = True,
         camera: Camera | None = None,
         tool_joints: tuple[str, ...] | list[str] | None = None,
+        allow_external_meshes: bool | None = None,
         **task_options: Any,
     ) -> None:
         registry = get_host().registry
@@ -147,12 +167,15 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
                 ee_link or robot_spec.ee_link,
                 home if home is not None else robot_spec.home,
                 tuple(tool_joints) if tool_joints is not None else robot_spec.tool_joints,
+                allow_external_meshes=allow_external_meshes,
             )
             if robot_spec.target_center is not None:
                 robot_options["target_center"] = robot_spec.target_center
         else:
             assert urdf is not None
-            self.robot = load_robot(urdf, ee_link, home, tuple(tool_joints or ()))
+            self.robot = load_robot(
+                urdf, ee_link, home, tuple(tool_joints or ()), allow_external_meshes=allow_external_meshes
+            )
 
         self.task_name = task
         self.backend_name = backend
@@ -201,10 +224,17 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         return self._backend
 
     def _check_action(self, action: Any) -> npt.NDArray[np.float64]:
+        """The action as float64, clipped into [-1, 1]; :class:`ActionError` if it is not a usable action."""
         try:
-            arr = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise ActionError(f"action {action!r} is not numeric: {exc}") from None
+            raw = np.asarray(action)
+        except Exception as exc:  # ragged sequences, objects whose __array__ raises
+            raise ActionError(f"action {action!r} is not an array of numbers: {exc}") from None
+        if raw.dtype.kind not in _ACTION_KINDS:
+            raise ActionError(
+                f"action has dtype {raw.dtype} ({raw.dtype.kind!r}); it must hold real numbers (float or int), "
+                "not booleans, complex numbers, strings or objects; the env's state is unchanged"
+            )
+        arr = raw.astype(np.float64)
         size = self.task.action_size()
         if arr.shape != (size,):
             what = (
@@ -223,10 +253,14 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         backend = self.backend
         backend.reset_joints(self.robot.home)
         self.task.initialize_episode(backend, self.np_random)
-        self._state = backend.read_state()
+        state, unstable = self._checked_state(backend, None)
+        self._state = state
         self._elapsed = 0
-        evaluation = self.task.evaluate(self._state)
-        return self.task.observation(self._state), dict(evaluation.info)
+        evaluation = self.task.evaluate(state)
+        info = dict(evaluation.info)
+        if unstable:
+            info["physics_unstable"] = True
+        return self.task.observation(state), info
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         if self._state is None:
@@ -239,15 +273,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         backend = self.backend
         backend.set_joint_targets(target)
         backend.step()
-        state = backend.read_state()
-        unstable = not state.is_finite()
-        if unstable:
-            state = ArmState(
-                q=self.robot.clip(np.nan_to_num(state.q)),
-                qd=np.nan_to_num(state.qd, posinf=0.0, neginf=0.0),
-                ee_pos=np.nan_to_num(state.ee_pos),
-                objects={name: body.nan_to_num() for name, body in state.objects.items()},
-            )
+        state, unstable = self._checked_state(backend, self._state)
         self._state = state
         self._elapsed += 1
         evaluation = self.task.evaluate(state)
@@ -259,6 +285,33 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         if unstable:
             info["physics_unstable"] = True
         return self.task.observation(state), float(evaluation.reward), terminated, truncated, info
+
+    def _checked_state(self, backend: Backend, previous: ArmState | None) -> tuple[ArmState, bool]:
+        """The backend's state, and whether the physics blew up (then a finite stand-in state).
+
+        A blow-up is a non-finite or absurd (beyond :data:`STATE_LIMIT`) value, or the
+        engine reporting that it had to repair a diverging step. The stand-in keeps the
+        last sane joint angles (or home), zero velocity where it was not finite, and the
+        end effector from the URDF's forward kinematics, so observations and rewards
+        stay finite while the episode ends.
+        """
+        state = backend.read_state()
+        values = np.concatenate((state.q, state.qd, state.ee_pos))
+        sane = bool((np.abs(values) <= STATE_LIMIT).all())  # False for NaN too
+        if state.objects:
+            sane = sane and all(body.is_finite() for body in state.objects.values())
+        if sane and not backend.diverged():
+            return state, False
+        if sane:
+            return state, True
+        fallback = previous.q if previous is not None else self.robot.home
+        q_ok = np.abs(state.q) <= STATE_LIMIT
+        q = self.robot.clip(np.where(q_ok, np.nan_to_num(state.q), fallback))
+        qd = np.where(np.abs(state.qd) <= STATE_LIMIT, np.nan_to_num(state.qd), 0.0)
+        ee_ok = bool(np.all(np.abs(state.ee_pos) <= STATE_LIMIT)) and bool(np.all(q_ok))
+        ee = state.ee_pos if ee_ok else self.robot.forward_kinematics(q)
+        objects = {name: body.nan_to_num() for name, body in state.objects.items()}
+        return ArmState(q=q, qd=qd, ee_pos=np.asarray(ee, dtype=np.float64), objects=objects), True
 
     def _goal_reward(self, achieved_goal: Any, desired_goal: Any, info: Any) -> npt.NDArray[np.float64]:
         return self.task.compute_reward(achieved_goal, desired_goal, info)

@@ -25,7 +25,7 @@ import numpy.typing as npt
 from gymnasium import spaces
 
 from armreach_core.backend import ArmState
-from armreach_core.errors import ConfigError
+from armreach_core.errors import ConfigError, URDFError
 from armreach_core.robot import FloatArray, RobotModel
 from armreach_core.task import Component, Evaluation, Scene, Task
 from armreach_core.workspace import TargetSampler, reachability_map
@@ -43,7 +43,8 @@ class ReachTask(Task):
             1 gives a steeper signal near the target for training.
         target_radius: radius of the target ball (m), default 0.5.
         target_center: centre of the ball (m, base frame); default from the robot's
-            registration, else ``(0.5 R, 0, 0.5 R)`` with ``R`` the arm's reach.
+            registration, else ``(0.5 R, 0, 0.5 R)`` with ``R`` the arm's reach (or, for an
+            arm that reaches no point of that ball, the reachable point nearest to it).
         min_target_height: lowest target height (m), default 0.05.
         goal_conditioned: return a Dict observation (observation / achieved_goal /
             desired_goal) for HER, default False.
@@ -76,8 +77,24 @@ class ReachTask(Task):
         self.goal_conditioned = bool(goal_conditioned)
         if target_center is None:
             reach = reachability_map(robot).reach
-            target_center = (0.5 * reach, 0.0, 0.5 * reach)
-        self.sampler = TargetSampler(robot, target_center, target_radius, min_target_height)
+            self.sampler = TargetSampler(robot, (0.5 * reach, 0.0, 0.5 * reach), target_radius, min_target_height)
+            if not self.sampler.has_targets():  # an odd arm: centre the ball on a point it reaches
+                center = self.sampler.nearest_reachable(self.sampler.center)
+                if center is None:
+                    raise URDFError(
+                        f"the arm of {str(robot.urdf_path)!r} reaches no volume at least {min_target_height} m above "
+                        f"the ground (reach about {reach:.3g} m), so it has no targets to reach; check the URDF's "
+                        "joint limits and link lengths, or lower min_target_height"
+                    )
+                self.sampler = TargetSampler(robot, center, target_radius, min_target_height)
+        else:
+            self.sampler = TargetSampler(robot, target_center, target_radius, min_target_height)
+            if not self.sampler.has_targets():
+                raise ConfigError(
+                    f"no point the arm reaches lies in the ball of radius {target_radius} m around "
+                    f"{self.sampler.center.tolist()} at least {min_target_height} m high; move target_center "
+                    f"inside the arm's reach (about {self.sampler.map.reach:.2f} m) or enlarge target_radius"
+                )
         self.target: FloatArray = self.sampler.center.copy()
         reach = self.sampler.map.reach
         self._components = self._layout(reach)

@@ -21,8 +21,9 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     arm). The joint position target is ``θ + a · max_joint_step`` (default 0.05 rad),
     applied through the backend's position control for ``substeps`` physics steps
     (default 10 × 1/240 s, so the env runs at 24 Hz). Actions outside [-1, 1] are
-    clipped; NaN, inf or a wrong shape raise :class:`~armreach_core.ActionError` and
-    leave the state untouched.
+    clipped into it; NaN, inf, a wrong shape or a dtype that is not real numbers (bool,
+    complex, str, object) raise :class:`~armreach_core.ActionError` and leave the state
+    untouched.
 
     ## Observation space
 
@@ -58,8 +59,9 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
 
     ## Episode end
 
-    * Termination: success (``d < success_threshold``, 0.05 m); a non-finite physics
-      state (``info["physics_unstable"]``); with ``joint_limit_mode="terminate"``, a
+    * Termination: success (``d < success_threshold``, 0.05 m); a physics blow-up (a
+      non-finite or absurd state, or a step the engine had to reset;
+      ``info["physics_unstable"]``, with finite observation and reward); with ``joint_limit_mode="terminate"``, a
       target outside the joint limits (the paper's rule; the default ``"clip"`` clips
       targets into the limits instead, which lets a policy learn near the limits).
     * Truncation: ``max_episode_steps`` steps (default 2048, the paper's cap).

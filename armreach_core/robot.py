@@ -76,6 +76,8 @@ class RobotModel:
             too (a gripper's fingers), in this order after the chain's joints. They have
             no effect on :meth:`forward_kinematics`; their Jacobian columns are zero.
             Default none: only the chain is actuated.
+        allow_external_meshes: accept meshes outside the URDF's folder or package (see
+            :func:`armreach_core.urdf.read_urdf`; default: ``ARMREACH_ALLOW_EXTERNAL_MESHES``).
 
     Raises:
         URDFError: the file cannot be used, with the reason and the fix.
@@ -87,8 +89,10 @@ class RobotModel:
         ee_link: str | None = None,
         home: npt.ArrayLike | None = None,
         tool_joints: tuple[str, ...] = (),
+        *,
+        allow_external_meshes: bool | None = None,
     ) -> None:
-        parsed = read_urdf(urdf)
+        parsed = read_urdf(urdf, allow_external_meshes=allow_external_meshes)
         self.parsed: ParsedURDF = parsed
         self.urdf_path: Path = parsed.path
         robot = parsed.model.robot

@@ -4,8 +4,12 @@ Every URDF that armreach touches goes through :func:`read_urdf`. It refuses DTDs
 entity declarations before any XML parser sees the file (so neither a billion-laughs
 bomb nor an external entity pointing at a local file is ever expanded), parses with an
 lxml parser that resolves nothing and reaches no network, and hands the checked text to
-yourdfpy. Mesh references (``package://``, ``file://``, relative or absolute) are
-resolved to absolute paths here, once, so that every backend loads the same files.
+yourdfpy. Every link and joint is checked first (:mod:`armreach_core.urdf_checks`:
+plain finite numbers, non-negative masses, valid inertias, unique names), so engines
+only ever see values they handle. Mesh references (``package://``, ``file://``,
+relative or absolute) are resolved to absolute paths here, once, so that every backend
+loads the same files; files outside the URDF's folder or ROS package are refused unless
+the user opts in (:func:`resolve_mesh_path`).
 """
 
 from __future__ import annotations
@@ -20,9 +24,14 @@ import yourdfpy
 from lxml import etree
 
 from armreach_core.errors import URDFError
+from armreach_core.urdf_checks import check_tree
 
 #: Largest URDF file accepted, in bytes. Real robot descriptions are far smaller.
 MAX_URDF_BYTES = 16 * 1024 * 1024
+#: Set to 1 to let URDFs use meshes outside their own folder or package (see :func:`resolve_mesh_path`).
+ALLOW_EXTERNAL_ENV = "ARMREACH_ALLOW_EXTERNAL_MESHES"
+#: Folders whose parent is taken as the package root of a URDF inside them (ROS layout).
+PACKAGE_SUBFOLDERS = ("urdf", "robots")
 
 _DTD_PATTERN = re.compile(rb"<!\s*(DOCTYPE|ENTITY)", re.IGNORECASE)
 
@@ -47,46 +56,118 @@ def _safe_parser() -> etree.XMLParser:
     )
 
 
-def resolve_mesh_path(filename: str, urdf_dir: Path) -> Path:
-    """Map a mesh reference of a URDF to the file it names.
+def allow_external_meshes_default() -> bool:
+    """Whether ``ARMREACH_ALLOW_EXTERNAL_MESHES`` opts in to meshes outside the robot's folder."""
+    return os.environ.get(ALLOW_EXTERNAL_ENV, "").strip().lower() in ("1", "true", "yes", "on")
 
-    ``package://PKG/rest`` is looked up as ``PKG/rest`` in the URDF's folder and each
-    of its parents, then as ``rest`` in the URDF's folder; ``file://`` is stripped;
-    relative paths are relative to the URDF's folder.
 
-    Raises:
-        URDFError: no such file exists.
+def mesh_roots(urdf_dir: Path, package: str | None = None) -> list[Path]:
+    """The folders a URDF in ``urdf_dir`` may take files from, without opting in.
+
+    The URDF's own folder; the ROS package it lives in: the nearest folder at or above it
+    holding a ``package.xml``, or its parent when the URDF sits in a ``urdf/`` or
+    ``robots/`` folder (the usual ``urdf/`` and ``meshes/`` siblings); and, for
+    ``package://PKG/...``, the folder named ``PKG`` at or above the URDF.
     """
+    urdf_dir = urdf_dir.resolve()
+    roots = [urdf_dir]
+    for folder in (urdf_dir, *urdf_dir.parents):
+        if (folder / "package.xml").is_file():
+            roots.append(folder)
+            break
+    if urdf_dir.name in PACKAGE_SUBFOLDERS:
+        roots.append(urdf_dir.parent)
+    if package:
+        roots += [folder for folder in (urdf_dir, *urdf_dir.parents) if folder.name == package]
+    return list(dict.fromkeys(roots))
+
+
+def _is_file(path: Path) -> bool:
+    """``path.is_file()``, False for names the system cannot even look up (too long, NUL bytes)."""
+    try:
+        return path.is_file()
+    except (OSError, ValueError):
+        return False
+
+
+def _inside(path: Path, roots: list[Path]) -> bool:
+    return any(path == root or path.is_relative_to(root) for root in roots)
+
+
+def _find(filename: str, urdf_dir: Path, allow_external: bool, what: str) -> tuple[Path | None, list[Path]]:
+    """The file a reference names (``None`` if none exists) and the places looked in."""
     candidates: list[Path] = []
+    package: str | None = None
     if filename.startswith("package://"):
         rest = filename[len("package://") :]
+        package, _, pkg_relative = rest.partition("/")
         for folder in (urdf_dir, *urdf_dir.parents):
             candidates.append(folder / rest)
-        pkg_relative = rest.split("/", 1)[1] if "/" in rest else rest
-        candidates.append(urdf_dir / pkg_relative)
+        candidates += [root / pkg_relative for root in (urdf_dir, *mesh_roots(urdf_dir)[1:]) if pkg_relative]
     else:
         plain = filename[len("file://") :] if filename.startswith("file://") else filename
         path = Path(plain)
         candidates.append(path if path.is_absolute() else urdf_dir / path)
+    roots = mesh_roots(urdf_dir, package)
+    outside: Path | None = None
     for candidate in candidates:
-        if candidate.is_file():
-            return candidate.resolve()
-    raise URDFError(
-        f"mesh file {filename!r} referenced by the URDF was not found (looked in "
-        f"{', '.join(str(c) for c in candidates[:3])}{'...' if len(candidates) > 3 else ''}); "
-        "ship the mesh beside the URDF or fix the path"
-    )
+        if _is_file(candidate):
+            real = candidate.resolve()
+            if allow_external or _inside(real, roots):
+                return real, candidates
+            outside = outside or real
+    if outside is not None:
+        raise URDFError(
+            f"{what} {filename!r} referenced by the URDF is {str(outside)!r}, outside the robot's folder "
+            f"({', '.join(str(r) for r in roots)}); armreach does not read files outside a URDF's folder or "
+            f"package unless asked to: move the {what} inside, or opt in with allow_external_meshes=True "
+            f"(or {ALLOW_EXTERNAL_ENV}=1) if you trust this URDF"
+        )
+    return None, candidates
 
 
-def read_urdf(path: str | os.PathLike[str]) -> ParsedURDF:
+def resolve_mesh_path(filename: str, urdf_dir: Path, *, allow_external: bool = False) -> Path:
+    """Map a mesh reference of a URDF to the file it names.
+
+    ``package://PKG/rest`` is looked up as ``PKG/rest`` in the URDF's folder and each
+    of its parents, then as ``rest`` in the URDF's folder and its package root; ``file://``
+    is stripped; relative paths are relative to the URDF's folder.
+
+    Unless ``allow_external``, the file (symbolic links followed) must lie inside one of
+    :func:`mesh_roots`: a URDF from elsewhere must not make armreach read, say,
+    ``../../.ssh/id_rsa`` or ``/etc/shadow`` and hand it to an engine.
+
+    Raises:
+        URDFError: no such file exists, or it lies outside the robot's folder.
+    """
+    found, candidates = _find(filename, urdf_dir, allow_external, "mesh")
+    if found is None:
+        raise URDFError(
+            f"mesh file {filename!r} referenced by the URDF was not found (looked in "
+            f"{', '.join(str(c) for c in candidates[:3])}{'...' if len(candidates) > 3 else ''}); "
+            "ship the mesh beside the URDF or fix the path"
+        )
+    return found
+
+
+def read_urdf(path: str | os.PathLike[str], *, allow_external_meshes: bool | None = None) -> ParsedURDF:
     """Read and check a URDF file.
+
+    Args:
+        path: the URDF file.
+        allow_external_meshes: accept meshes outside the URDF's folder or package
+            (default: the ``ARMREACH_ALLOW_EXTERNAL_MESHES`` environment variable, else no).
 
     Raises:
         URDFError: the file is missing, too large, declares a DTD or entities, is not
-            well-formed XML, is not a ``<robot>``, or names a mesh that does not exist.
+            well-formed XML, is not a ``<robot>``, breaks a rule of
+            :mod:`armreach_core.urdf_checks`, or names a mesh that does not exist or lies
+            outside its folder.
     """
+    if allow_external_meshes is None:
+        allow_external_meshes = allow_external_meshes_default()
     urdf_path = Path(path).expanduser()
-    if not urdf_path.is_file():
+    if not _is_file(urdf_path):
         raise URDFError(f"URDF file not found: {str(urdf_path)!r}; pass the path of an existing .urdf file")
     size = urdf_path.stat().st_size
     if size > MAX_URDF_BYTES:
@@ -94,7 +175,10 @@ def read_urdf(path: str | os.PathLike[str]) -> ParsedURDF:
             f"URDF file {str(urdf_path)!r} is {size} bytes, over the {MAX_URDF_BYTES}-byte limit; "
             "is it really a robot description?"
         )
-    data = urdf_path.read_bytes()
+    with open(urdf_path, "rb") as handle:  # at most the limit, even if the file grew since stat()
+        data = handle.read(MAX_URDF_BYTES + 1)
+    if len(data) > MAX_URDF_BYTES:
+        raise URDFError(f"URDF file {str(urdf_path)!r} grew past the {MAX_URDF_BYTES}-byte limit while being read")
     if _DTD_PATTERN.search(data):
         raise URDFError(
             f"URDF file {str(urdf_path)!r} declares a DTD or XML entities, which armreach never expands "
@@ -106,13 +190,23 @@ def read_urdf(path: str | os.PathLike[str]) -> ParsedURDF:
         raise URDFError(f"URDF file {str(urdf_path)!r} is not well-formed XML: {exc}") from None
     if not isinstance(root.tag, str) or etree.QName(root).localname != "robot":
         raise URDFError(f"URDF file {str(urdf_path)!r} has root element <{root.tag}>, expected <robot>")
+    try:
+        check_tree(root)
+    except URDFError as exc:
+        raise URDFError(f"URDF file {str(urdf_path)!r}: {exc}") from None
 
     urdf_dir = urdf_path.resolve().parent
     for mesh in root.iter("mesh"):
         filename = mesh.get("filename")
         if not filename:
             raise URDFError(f"URDF file {str(urdf_path)!r} has a <mesh> without a filename attribute")
-        mesh.set("filename", str(resolve_mesh_path(filename, urdf_dir)))
+        mesh.set("filename", str(resolve_mesh_path(filename, urdf_dir, allow_external=allow_external_meshes)))
+    for texture in root.iter("texture"):  # engines that draw textures read these files too
+        filename = texture.get("filename")
+        if filename:
+            found, _ = _find(filename, urdf_dir, allow_external_meshes, "texture")
+            if found is not None:  # a missing texture only loses colour, as in every URDF viewer
+                texture.set("filename", str(found))
     resolved = b'<?xml version="1.0" encoding="utf-8"?>\n' + etree.tostring(root, encoding="utf-8")
     try:
         model = yourdfpy.URDF.load(

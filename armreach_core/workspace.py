@@ -3,7 +3,8 @@
 The map is the set of voxels that the end effector visits over many joint
 configurations drawn uniformly inside the limits, eroded by one voxel so that every
 kept voxel lies inside the reachable set, not on its rim. It depends on the URDF alone
-and a fixed seed, so it is identical on every backend and every run.
+and a fixed seed, so it is identical on every backend and every run. Voxels are 4 cm,
+coarser for arms over ~6 m so that the map stays small in memory.
 """
 
 from __future__ import annotations
@@ -17,6 +18,9 @@ from armreach_core.errors import ConfigError
 from armreach_core.robot import FloatArray, RobotModel
 
 VOXEL = 0.04  # m
+#: Most voxels along one axis: an arm larger than ~6 m gets coarser voxels rather than a
+#: grid that could not fit in memory.
+MAX_VOXELS_PER_AXIS = 160
 SAMPLES = 120_000
 _MAP_SEED = 20240607
 
@@ -29,6 +33,8 @@ class ReachabilityMap:
         points = np.concatenate(
             [robot.forward_kinematics(robot.sample_configurations(rng, 20_000)) for _ in range(samples // 20_000)]
         )
+        extent = float(np.max(points.max(axis=0) - points.min(axis=0)))
+        voxel = max(voxel, extent / (MAX_VOXELS_PER_AXIS - 3))
         self.voxel = voxel
         self.reach = float(np.max(np.linalg.norm(points, axis=1)))
         cells = np.floor(points / voxel).astype(np.int64)
@@ -42,6 +48,13 @@ class ReachabilityMap:
             for shift in (-1, 1):
                 interior &= np.roll(occupied, shift, axis=axis)
         self.grid = interior
+
+    def centers(self, low: npt.ArrayLike, high: npt.ArrayLike) -> FloatArray:
+        """Centres of the interior voxels inside the box ``[low, high]`` (m), shape (n, 3)."""
+        lo = np.clip(np.floor(np.asarray(low) / self.voxel).astype(np.int64) - self.origin, 0, self.grid.shape)
+        hi = np.clip(np.floor(np.asarray(high) / self.voxel).astype(np.int64) - self.origin + 1, 0, self.grid.shape)
+        sub = self.grid[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]]
+        return np.asarray((np.argwhere(sub) + lo + self.origin + 0.5) * self.voxel, dtype=np.float64)
 
     def contains(self, points: npt.ArrayLike) -> npt.NDArray[np.bool_]:
         """Whether each point (shape (3,) or (n, 3)) lies in an interior voxel."""
@@ -81,6 +94,23 @@ class TargetSampler:
         self.radius = float(radius)
         self.min_height = float(min_height)
         self.map = reachability_map(robot)
+        inside = self.map.centers(self.center - self.radius, self.center + self.radius)
+        #: Interior voxel centres that are valid targets: drawn from when rejection sampling
+        #: finds nothing (a ball that barely overlaps the reachable set).
+        self.fallback: FloatArray = inside[self.accepts(inside)] if len(inside) else inside
+
+    def has_targets(self) -> bool:
+        """Whether any valid target exists."""
+        return len(self.fallback) > 0
+
+    def nearest_reachable(self, point: npt.ArrayLike) -> FloatArray | None:
+        """The interior voxel centre at least ``min_height`` high nearest to ``point``, if any."""
+        every = (np.argwhere(self.map.grid) + self.map.origin + 0.5) * self.map.voxel
+        every = every[every[:, 2] >= self.min_height]
+        if not len(every):
+            return None
+        nearest: FloatArray = every[np.argmin(np.linalg.norm(every - np.asarray(point), axis=1))]
+        return nearest
 
     def accepts(self, points: npt.ArrayLike) -> npt.NDArray[np.bool_]:
         """Whether each point is a valid target."""
@@ -97,6 +127,9 @@ class TargetSampler:
             point: FloatArray = self.center + direction * self.radius * rng.random() ** (1.0 / 3.0)
             if self.accepts(point)[0]:
                 return point
+        if self.has_targets():
+            chosen: FloatArray = self.fallback[rng.integers(len(self.fallback))].copy()
+            return chosen
         raise ConfigError(
             f"no reachable target found in the ball of radius {self.radius} m around {self.center.tolist()} "
             f"above z={self.min_height} m; move target_center inside the arm's reach (about {self.map.reach:.2f} m)"

@@ -228,3 +228,53 @@ def test_docstring_table_matches_the_code():
     env.close()
     assert table in ArmReach6DOFEnv.__doc__
     assert "## Version history" in ArmReach6DOFEnv.__doc__
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        np.zeros(6, dtype=complex),
+        np.array(["0.1"] * 6),
+        np.array([0.1] * 6, dtype=object),
+        np.zeros(6, dtype=bool),
+        [0.1, 0.1, None, 0.1, 0.1, 0.1],
+        [[0.1], 0.1, 0.1, 0.1, 0.1, 0.1],  # ragged
+        np.float64(0.1),
+    ],
+    ids=["complex", "str", "object", "bool", "none", "ragged", "scalar"],
+)
+def test_actions_of_the_wrong_dtype_raise_and_leave_state_untouched(env, bad):
+    env.reset(seed=0)
+    before = env.unwrapped.backend.read_state()
+    elapsed = env.unwrapped._elapsed
+    with pytest.raises(ActionError):
+        env.step(bad)
+    after = env.unwrapped.backend.read_state()
+    np.testing.assert_array_equal(before.q, after.q)
+    np.testing.assert_array_equal(before.qd, after.qd)
+    assert env.unwrapped._elapsed == elapsed
+    # integer and float32 arrays and plain lists are fine; values beyond ±1 are clipped
+    for good in (np.zeros(6, dtype=np.int64), np.zeros(6, dtype=np.float32), [0.0] * 6):
+        env.step(good)
+    env.reset(seed=0)
+    clipped = env.step(np.full(6, 50.0))[0]
+    env.reset(seed=0)
+    np.testing.assert_array_equal(env.step(np.ones(6))[0], clipped)
+
+
+def test_a_physics_blow_up_ends_the_episode_and_says_so(backend):
+    """NaN put into the engine's own joint state (public backend API, real engine) must not escape."""
+    env = ArmReach6DOFEnv(backend=backend)
+    env.reset(seed=0)
+    env.unwrapped.backend.reset_joints(np.full(6, np.nan))
+    obs, reward, terminated, truncated, info = env.step(np.zeros(6, dtype=np.float32))
+    assert terminated and not truncated
+    assert info["physics_unstable"] is True
+    assert np.all(np.isfinite(obs)) and np.isfinite(reward)
+    assert env.observation_space.contains(obs)
+    obs, info = env.reset(seed=1)  # the next episode starts clean
+    assert "physics_unstable" not in info
+    obs, _, terminated, _, info = env.step(np.zeros(6, dtype=np.float32))
+    assert not terminated and "physics_unstable" not in info
+    assert np.all(np.isfinite(obs))
+    env.close()

@@ -251,3 +251,147 @@ def test_run_seeds_give_disjoint_env_seeds() -> None:
     seeds = [set(range(_seed_base(s), _seed_base(s) + 64)) for s in range(20)]
     assert all(a.isdisjoint(b) for i, a in enumerate(seeds) for b in seeds[i + 1 :])
     assert all(min(s) >= 10_100 for s in seeds)  # clear of the evaluation seeds 10000 + i
+
+
+def _assert_run_readable(run_dir: Path) -> int:
+    """Every file of a (possibly killed) off-policy run folder reads back; returns the checkpoint's step count."""
+    from stable_baselines3 import DDPG
+
+    config = runs.read_config(run_dir)
+    assert config["algo"] == "ddpg"
+    assert "train" in (run_dir / "command.txt").read_text(encoding="utf-8")
+    assert "versions" in json.loads((run_dir / "environment.json").read_text(encoding="utf-8"))
+    progress = json.loads((run_dir / "checkpoint.json").read_text(encoding="utf-8"))
+    model = DDPG.load(run_dir / "checkpoint.zip", device="cpu")
+    # written in the order replay buffer, model, step count: the count never runs ahead of the model
+    assert 0 < progress["timesteps"] <= model.num_timesteps
+    if (run_dir / "checkpoint_replay.pkl").exists():
+        model.load_replay_buffer(run_dir / "checkpoint_replay.pkl")
+        assert model.replay_buffer.size() > 0
+    for path in sorted((run_dir / "monitor").glob("*.monitor.csv")):
+        lines = path.read_text(encoding="utf-8").splitlines()
+        assert lines[0].startswith("#") and json.loads(lines[0][1:])
+        rows = list(csv.DictReader(lines[1:]))
+        assert all(len(row) == len(rows[0]) and None not in row.values() for row in rows)
+        assert all(np.isfinite(float(row["r"])) and int(row["l"]) > 0 for row in rows)
+    return int(model.num_timesteps)
+
+
+def _start_training(run_dir: Path, preset: str, *extra: str) -> subprocess.Popen[str]:
+    cmd = [sys.executable, "-m", "armreach_core.cli", "train"]
+    args = ["--resume", str(run_dir)] if "--resume" in extra else ["--algo", "ddpg", "--preset", preset]
+    args += ["--out", str(run_dir)] if "--resume" not in extra else []
+    rest = [e for e in extra if e != "--resume"]
+    return subprocess.Popen(
+        [*cmd, *args, *rest], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=os.environ.copy()
+    )
+
+
+def _wait_for(path: Path, proc: subprocess.Popen[str], timeout: float = 90.0) -> None:
+    deadline = time.time() + timeout
+    while not path.exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    assert path.exists(), proc.stderr.read() if proc.poll() is not None and proc.stderr else "timed out"
+
+
+def test_sigkill_keeps_every_file_readable_and_resume_continues(tmp_path: Path, tiny: str) -> None:
+    run_dir = tmp_path / "run"
+    proc = _start_training(run_dir, tiny, "--steps", "100000")
+    _wait_for(run_dir / "checkpoint.json", proc)
+    time.sleep(0.7)  # into the next checkpoints (every 100 steps): the kill may land inside a write
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert proc.returncode == -signal.SIGKILL
+    stopped_at = _assert_run_readable(run_dir)
+    # Episodes after the last checkpoint belong to steps the resume redoes: the checkpoint records
+    # how many monitor rows it includes, and only those are kept.
+    kept = sum(json.loads((run_dir / "checkpoint.json").read_text())["monitor_rows"].values())
+    rows_before = _monitor_rows(run_dir)[:kept]
+    leftovers = [p for p in run_dir.iterdir() if p.name.startswith(".")]
+
+    assert main(["train", "--resume", str(run_dir), "--steps", str(stopped_at + 120)]) == 0
+    assert json.loads((run_dir / "checkpoint.json").read_text())["timesteps"] == stopped_at + 120
+    assert _assert_run_readable(run_dir) == stopped_at + 120
+    assert _monitor_rows(run_dir)[: len(rows_before)] == rows_before  # no episode lost
+    assert not [p for p in leftovers if p.exists()], "resume removes what the killed writer left"
+    assert (run_dir / "model.zip").is_file()
+
+
+@pytest.mark.slow
+def test_repeated_sigkills_at_random_moments_lose_nothing(tmp_path: Path) -> None:
+    """Kill, check, resume, kill again... with checkpoints every 10 steps, so many kills land inside writes."""
+    preset = tmp_path / "often.yaml"
+    preset.write_text(TINY.replace("checkpoint_every: 100", "checkpoint_every: 10"))
+    run_dir = tmp_path / "run"
+    rng = np.random.default_rng(7)
+    proc = _start_training(run_dir, str(preset), "--steps", "100000")
+    _wait_for(run_dir / "checkpoint.json", proc)
+    progress = run_dir / "checkpoint.json"
+    steps, rows, inside_a_write, last = 0, [], 0, 0
+    for kill in range(8):
+        deadline = time.time() + 90
+        while progress.stat().st_mtime_ns == last and time.time() < deadline and proc.poll() is None:
+            time.sleep(0.05)  # until this process has written a checkpoint of its own
+        assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+        time.sleep(float(rng.uniform(0.0, 1.5)))  # checkpoints every 10 steps: some kills land inside a write
+        proc.kill()
+        proc.communicate(timeout=60)
+        last = progress.stat().st_mtime_ns
+        inside_a_write += any(p.name.startswith(".") for p in run_dir.iterdir())  # a writer's temporary file
+        now = _assert_run_readable(run_dir)
+        assert now >= steps, f"kill {kill}: the checkpoint went back from {steps} to {now} steps"
+        kept = sum(json.loads(progress.read_text())["monitor_rows"].values())
+        current_rows = _monitor_rows(run_dir)[:kept]  # rows the checkpoint includes
+        assert current_rows[: len(rows)] == rows, f"kill {kill}: monitor rows were lost"
+        steps, rows = now, current_rows
+        proc = _start_training(run_dir, "", "--resume")
+    proc.kill()
+    proc.communicate(timeout=60)
+    final = _assert_run_readable(run_dir)
+    assert main(["train", "--resume", str(run_dir), "--steps", str(final + 20)]) == 0
+    assert _assert_run_readable(run_dir) == final + 20
+    print(f"9 SIGKILLs, {inside_a_write} of 8 inside a write; checkpoint at {final} steps, nothing lost")
+
+
+def _untrained_run(run_dir: Path, preset: str) -> Path:
+    """A ddpg run folder with a (junk) checkpoint and model, made without training."""
+    from armreach_core.rl.train import resolve_config
+
+    runs.new_run_dir(run_dir)
+    runs.write_yaml(run_dir / runs.CONFIG, resolve_config(algo="ddpg", preset=preset, steps=300))
+    for name in (runs.MODEL, runs.CHECKPOINT):
+        (run_dir / name).write_bytes(b"not a zip")
+    return run_dir
+
+
+@pytest.mark.skipif(not hasattr(os, "getuid"), reason="no user ids on this system")
+def test_runs_other_users_could_have_written_are_refused_unless_trusted(
+    tmp_path: Path, tiny: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run_dir = _untrained_run(tmp_path / "run", tiny)
+    runs.check_trusted(run_dir)  # ours, not writable by others
+    (run_dir / runs.MODEL).chmod(0o666)
+    with pytest.raises(ConfigError, match=r"model\.zip is not safe to trust, it is writable by every user.*--trust"):
+        runs.check_trusted(run_dir)
+    runs.check_trusted(run_dir, trust=True)
+    assert main(["evaluate", str(run_dir), "--episodes", "1"]) == 2
+    assert "refusing to load the run" in capsys.readouterr().err
+    assert main(["evaluate", str(run_dir), "--episodes", "1", "--trust"]) == 2
+    assert "damaged" in capsys.readouterr().err  # past the trust check, into the (junk) file
+    assert main(["train", "--resume", str(run_dir)]) == 2
+    assert "refusing to load the run" in capsys.readouterr().err
+    assert main(["train", "--resume", str(run_dir), "--trust"]) == 2
+    assert "damaged" in capsys.readouterr().err
+    (run_dir / runs.MODEL).chmod(0o644)
+    run_dir.chmod(0o777)
+    with pytest.raises(ConfigError, match="writable by every user"):
+        runs.check_trusted(run_dir)
+    run_dir.chmod(0o755)
+    if os.getuid() == 0:  # only root can give a file to someone else
+        os.chown(run_dir / runs.CHECKPOINT, 54321, -1)
+        with pytest.raises(ConfigError, match=r"checkpoint\.zip .* belongs to user id 54321"):
+            runs.check_trusted(run_dir)
+        os.chown(run_dir / runs.CHECKPOINT, 0, 54321)
+        (run_dir / runs.CHECKPOINT).chmod(0o664)
+        with pytest.raises(ConfigError, match="writable by group id 54321"):
+            runs.check_trusted(run_dir)

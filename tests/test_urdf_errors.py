@@ -124,3 +124,69 @@ def test_env_reports_urdf_errors_and_errors_share_a_base(tmp_path):
         armreach_core.ArmReach6DOFEnv(urdf=tmp_path / "missing.urdf")
     assert issubclass(URDFError, armreach_core.ArmReachError)
     assert issubclass(armreach_core.BackendUnavailableError, armreach_core.ArmReachError)
+
+
+UPPER_ARM_INERTIA = 'ixx="0.132451" ixy="0" ixz="0" iyy="0.132451" iyz="0" izz="0.012237"'
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        ('<mass value="8.393"/>', '<mass value="-8.393"/>', r"value='-8.393' of <mass>.*'upper_arm_link' must be >= 0"),
+        ('<mass value="8.393"/>', '<mass value="nan"/>', r"value='nan' of <mass>.*not a number.*no nan, inf"),
+        ('<mass value="8.393"/>', '<mass value="1e400"/>', "overflows a double"),
+        ('<mass value="8.393"/>', '<mass value="1e300"/>', r"beyond ±1e\+06"),
+        ('<mass value="8.393"/>', '<mass value="1_000"/>', "not a number"),
+        ('<mass value="8.393"/>', "", r"'upper_arm_link' has no <mass value=...>"),
+        (UPPER_ARM_INERTIA, UPPER_ARM_INERTIA.replace('ixy="0"', 'ixy="5"'), "not positive semi-definite"),
+        (UPPER_ARM_INERTIA, UPPER_ARM_INERTIA.replace('ixx="0.132451"', 'ixx="-0.1"'), "not positive semi-definite"),
+        (UPPER_ARM_INERTIA, UPPER_ARM_INERTIA.replace(' iyz="0"', ""), "has no iyz= attribute"),
+        ('radius="0.045" length="0.30"', 'radius="-0.045" length="0.30"', r"radius='-0.045' of <cylinder>.* > 0"),
+        ('radius="0.045" length="0.30"', 'radius="0.045"', "has no length= attribute"),
+        ('<origin xyz="0 0 0.28" rpy="0 0 0"/>', '<origin xyz="0 0.28" rpy="0 0 0"/>', "not 3 numbers"),
+        ('<origin xyz="0 0 0.28" rpy="0 0 0"/>', '<origin xyz="0,0,0.28" rpy="0 0 0"/>', "commas"),
+        ('damping="0.5"', 'damping="-1"', r"damping='-1' of <dynamics> of joint 'shoulder_pan_joint' must be >= 0"),
+        ('lower="-6.283185"', 'lower="-1e30"', r"lower='-1e30' of <limit>.*beyond"),
+        ('<axis xyz="0 0 1"/>', '<axis xyz="0 0 0"/>', "has no direction"),
+        ('type="revolute"', 'type="hinge"', "type 'hinge'; URDF joint types are"),
+        ("</robot>", '<link name="tool0"/></robot>', "link name 'tool0' is used twice"),
+        # a duplicate joint name made PyBullet's loader crash with a segmentation fault
+        (
+            "</robot>",
+            '<link name="x"/><joint name="world_joint" type="fixed"><parent link="tool0"/><child link="x"/></joint>'
+            "</robot>",
+            "joint name 'world_joint' is used twice",
+        ),
+    ],
+)
+def test_bad_numbers_and_names_are_urdf_errors_naming_the_element(tmp_path, ar6_urdf, old, new, message):
+    text = ar6_urdf.read_text()
+    assert old in text
+    path = tmp_path / "arm.urdf"
+    path.write_text(text.replace(old, new, 1))
+    with pytest.raises(URDFError, match=message):
+        RobotModel(path)
+
+
+def test_too_many_links_is_a_urdf_error(tmp_path):
+    body = "".join(LINK.format(f"l{i}") for i in range(1001))
+    with pytest.raises(URDFError, match="1001 links, over armreach's limit of 1000"):
+        RobotModel(_write(tmp_path, body))
+
+
+def test_a_file_over_the_size_limit_fails_fast(tmp_path, monkeypatch):
+    from armreach_core import urdf
+
+    monkeypatch.setattr(urdf, "MAX_URDF_BYTES", 4096)
+    path = _write(tmp_path, LINK.format("a") + LINK.format("b") + JOINT.format("j", "a", "b") + " " * 4096)
+    with pytest.raises(URDFError, match="over the 4096-byte limit"):
+        RobotModel(path)
+
+
+def test_names_too_long_to_look_up_are_urdf_errors(tmp_path):
+    """Found by fuzzing: a 300-character mesh name made the file lookup raise OSError."""
+    body = '<link name="a"><visual><geometry><mesh filename="' + "m" * 300 + '.stl"/></geometry></visual></link>'
+    with pytest.raises(URDFError, match="not found"):
+        RobotModel(_write(tmp_path, body + LINK.format("b") + JOINT.format("j", "a", "b")))
+    with pytest.raises(URDFError, match="not found"):
+        armreach_core.ArmReach6DOFEnv(urdf=tmp_path / ("u" * 300 + ".urdf"))

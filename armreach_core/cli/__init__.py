@@ -6,10 +6,10 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from armreach_core.cli import bench, evaluate, experiment, parity, plugins, rollout, train
+from armreach_core.cli import bench, evaluate, experiment, parity, plugins, rollout, soak, train
 from armreach_core.errors import ArmReachError
 
-COMMANDS = (train, evaluate, experiment, rollout, parity, bench, plugins)
+COMMANDS = (train, evaluate, experiment, rollout, parity, bench, soak, plugins)
 
 
 def build_parser() -> argparse.ArgumentParser:

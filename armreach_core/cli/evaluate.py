@@ -17,6 +17,9 @@ def add_parser(sub: Any) -> None:
         "--max-episode-steps", type=int, default=None, help="episode limit (default: the run's, 2048 as in the paper)"
     )
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: RUN/eval-<backend>)")
+    parser.add_argument(
+        "--trust", action="store_true", help="load a run another user owns or may write to (its files are pickles)"
+    )
     parser.set_defaults(run=run)
 
 
@@ -29,6 +32,7 @@ def run(args: argparse.Namespace) -> int:
         backend=args.backend,
         seed=args.seed,
         max_episode_steps=args.max_episode_steps,
+        trust=args.trust,
     )
     out = args.out or args.run_dir / f"eval-{evaluation.backend}"
     summary = save_evaluation(evaluation, out)

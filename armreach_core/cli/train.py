@@ -46,6 +46,9 @@ def add_parser(sub: Any) -> None:
     parser.add_argument("--device", default="auto", help="torch device (default: auto)")
     parser.add_argument("--out", type=Path, default=None, help="run folder (default: runs/<algo>-<preset>-...)")
     parser.add_argument("--resume", type=Path, default=None, metavar="RUN", help="continue the run in RUN")
+    parser.add_argument(
+        "--trust", action="store_true", help="resume a run another user owns or may write to (its files are pickles)"
+    )
     parser.set_defaults(run=run)
 
 
@@ -68,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         if args.device != "auto":
             config["device"] = args.device
         print(f"resuming {run_dir} towards {config['timesteps']} steps")
-        result = train(config, run_dir, resume=True, command=args.command_line)
+        result = train(config, run_dir, resume=True, command=args.command_line, trust=args.trust)
     else:
         config = resolve_config(
             algo=args.algo or default_algo(args.preset, args.task),

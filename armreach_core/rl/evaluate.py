@@ -131,10 +131,16 @@ def _average_trace(traces: list[npt.NDArray[np.float64]]) -> npt.NDArray[np.floa
     return np.asarray(total / np.maximum(count, 1), dtype=np.float64)
 
 
-def load_agent(run_dir: Path, config: dict[str, Any], backend: str | None = None) -> Agent:
-    """The run's controller: its final model (else its latest checkpoint), or the IK reference."""
+def load_agent(run_dir: Path, config: dict[str, Any], backend: str | None = None, *, trust: bool = False) -> Agent:
+    """The run's controller: its final model (else its latest checkpoint), or the IK reference.
+
+    Raises:
+        ConfigError: no model, a damaged one, or a run folder not safe to unpickle from
+            (see :func:`armreach_core.rl.runs.check_trusted`; ``trust`` skips that check).
+    """
     if config["algo"] == "ik":
         return IKAgent(float(config["settings"].get("damping", 0.05)))
+    runs.check_trusted(run_dir, trust=trust)
     model_path, checkpoint = run_dir / runs.MODEL, run_dir / runs.CHECKPOINT
     if model_path.is_file() and checkpoint.is_file() and checkpoint.stat().st_mtime > model_path.stat().st_mtime + 1:
         warnings.warn(
@@ -167,12 +173,16 @@ def evaluate_run(
     backend: str | None = None,
     seed: int = 10_000,
     max_episode_steps: int | None = None,
+    trust: bool = False,
 ) -> Evaluation:
-    """Evaluate a run folder on the paper's task (2048-step limit), optionally on another backend."""
+    """Evaluate a run folder on the paper's task (2048-step limit), optionally on another backend.
+
+    ``trust`` loads the model even from a folder another user owns or may write to.
+    """
     config = runs.read_config(run_dir)
     if max_episode_steps is not None:
         config["eval_max_episode_steps"] = max_episode_steps
-    agent = load_agent(run_dir, config, backend)
+    agent = load_agent(run_dir, config, backend, trust=trust)
     kwargs = env_kwargs(config, backend=backend, evaluation=True)
     evaluation = run_episodes(lambda: ArmEnv(**kwargs), agent, episodes, seed)
     evaluation.source = agent.describe() if isinstance(agent, (SB3Agent, IKAgent)) else ""

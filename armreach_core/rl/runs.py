@@ -14,6 +14,10 @@ Layout of ``runs/<name>/``::
 
 Every file is written to a temporary name in the same folder and renamed into place,
 so a run killed at any moment leaves the previous version of each file readable.
+
+Trust: ``model.zip``, ``checkpoint.zip`` and ``checkpoint_replay.pkl`` are pickles (as
+in Stable-Baselines3), and loading one runs code from it. :func:`check_trusted` refuses
+a run folder another user owns or may write to, unless the user passes ``--trust``.
 """
 
 from __future__ import annotations
@@ -23,8 +27,10 @@ import datetime as _dt
 import json
 import os
 import platform
+import re
 import shlex
 import shutil
+import stat
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from importlib import metadata
@@ -48,6 +54,55 @@ TRUST_NOTE = (
     "model and checkpoint files are pickles: loading one runs code from it; load only runs you or someone "
     "you trust produced"
 )
+#: The files of a run that are unpickled when they are loaded.
+PICKLES = (MODEL, CHECKPOINT, REPLAY)
+
+
+def _private_group(gid: int, uid: int) -> bool:
+    """Whether ``gid`` is ``uid``'s own group (a umask of 002 with per-user groups makes files group-writable)."""
+    import grp
+    import pwd
+
+    try:
+        group, user = grp.getgrgid(gid), pwd.getpwuid(uid)
+    except KeyError:
+        return False
+    return group.gr_name == user.pw_name and all(member == user.pw_name for member in group.gr_mem)
+
+
+def check_trusted(run_dir: str | os.PathLike[str], *, trust: bool = False) -> None:
+    """Refuse to unpickle from a run folder that someone other than the current user could have written.
+
+    The folder and its pickle files (:data:`PICKLES`) must belong to the current user (or
+    root) and must not be writable by others, nor by a group other than the user's own;
+    otherwise another local user could have put code in them. ``trust=True`` (``--trust``)
+    skips the check. Nothing is checked where the system has no user ids (Windows).
+
+    Raises:
+        ConfigError: naming the file, who owns it or who may write it, and ``--trust``.
+    """
+    if trust or not hasattr(os, "getuid"):
+        return
+    me = os.getuid()
+    folder = Path(run_dir)
+    for path in (folder, *(folder / name for name in PICKLES)):
+        try:
+            info = path.stat()
+        except FileNotFoundError:
+            continue
+        problem = None
+        if info.st_uid not in (me, 0):
+            problem = f"it belongs to user id {info.st_uid}, not to you ({me})"
+        elif info.st_mode & stat.S_IWOTH:
+            problem = "it is writable by every user"
+        elif info.st_mode & stat.S_IWGRP and not _private_group(info.st_gid, me):
+            problem = f"it is writable by group id {info.st_gid}"
+        if problem:
+            raise ConfigError(
+                f"refusing to load the run in {folder}: {path} is not safe to trust, {problem}. Model, checkpoint "
+                "and replay files are pickles, and loading one runs any code put in it. If you know where this "
+                "run came from, pass --trust (trust=True in Python); otherwise copy nothing from it"
+            )
 
 
 @contextlib.contextmanager
@@ -72,6 +127,20 @@ def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+#: Names :func:`atomic_path` and :func:`atomic_save` give their temporary files.
+_TEMPORARY = re.compile(r"^\..+\.[a-z0-9_]{8}\.(tmp|zip|pkl)$")
+
+
+def remove_temporaries(run_dir: str | os.PathLike[str]) -> list[Path]:
+    """Delete temporary files a killed writer left in ``run_dir``; returns what was removed."""
+    removed = []
+    for path in Path(run_dir).iterdir():
+        if path.is_file() and _TEMPORARY.match(path.name):
+            path.unlink(missing_ok=True)
+            removed.append(path)
+    return removed
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:

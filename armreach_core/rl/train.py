@@ -160,9 +160,11 @@ class _Stop:
         self.pending = False
 
     def handler(self, signum: int, frame: FrameType | None) -> None:
-        if self.saving:
-            self.pending = True
-            print("\nstill saving the checkpoint; it will stop right after", file=sys.stderr)
+        if self.saving:  # never interrupt a checkpoint half-way
+            if self.requested:
+                self.pending = True  # a second Ctrl-C: abort once the files are consistent
+            self.requested = True
+            print("\nwriting a checkpoint; stopping right after it", file=sys.stderr)
             return
         if self.requested:
             raise KeyboardInterrupt
@@ -297,10 +299,11 @@ def read_progress(run_dir: Path) -> dict[str, Any]:
     return data
 
 
-def _load_checkpoint(config: dict[str, Any], run_dir: Path, env: Any) -> Any:
+def _load_checkpoint(config: dict[str, Any], run_dir: Path, env: Any, trust: bool) -> Any:
     path = run_dir / runs.CHECKPOINT
     if not path.is_file():
         raise ConfigError(f"{run_dir} has no {runs.CHECKPOINT} to resume from")
+    runs.check_trusted(run_dir, trust=trust)
     try:
         model = algo_class(config["algo"]).load(path, env=env, device=config.get("device", "auto"))
     except Exception as exc:  # a truncated or foreign zip: say which file and what to do
@@ -320,6 +323,23 @@ def _load_checkpoint(config: dict[str, Any], run_dir: Path, env: Any) -> Any:
     return model
 
 
+def configure_threads(settings: dict[str, Any], device: str) -> int:
+    """Set torch's CPU threads: the preset's ``torch_threads``, else 1 when training on the CPU.
+
+    One thread is the measured default: with two, PyTorch's OpenMP workers fight the
+    physics engine for the cores; SB3 DDPG on PyBullet ran at 3.8 env steps/s with
+    torch's default of 2 threads on a 2-core machine and at 74 with 1 (``armreach bench``).
+    """
+    import torch
+
+    threads = int(settings.get("torch_threads", 0))
+    if threads <= 0:
+        on_cpu = device == "cpu" or (device == "auto" and not torch.cuda.is_available())
+        threads = 1 if on_cpu else torch.get_num_threads()
+    torch.set_num_threads(threads)
+    return threads
+
+
 def _seed_base(seed: int) -> int:
     """A well-spread 31-bit seed for run seed ``seed``; env ``i`` of the run gets ``base + i``."""
     import numpy as np
@@ -334,14 +354,20 @@ def train(
     resume: bool = False,
     stream: TextIO | None = sys.stderr,
     command: list[str] | None = None,
+    trust: bool = False,
 ) -> TrainResult:
-    """Train (or continue) the run in ``run_dir`` until ``config['timesteps']``."""
-    import torch
+    """Train (or continue) the run in ``run_dir`` until ``config['timesteps']``.
+
+    ``trust`` resumes even from a folder another user owns or may write to (its
+    checkpoint is a pickle: see :func:`armreach_core.rl.runs.check_trusted`).
+    """
 
     algo = config["algo"]
     if algo not in RL_ALGOS:
         raise ConfigError(f"{algo!r} is not trained; use one of {list(RL_ALGOS)}")
     if resume:
+        runs.check_trusted(run_dir, trust=trust)  # before writing anything into it
+        runs.remove_temporaries(run_dir)  # half-written files of a run that was killed
         progress = read_progress(run_dir)
         if not (run_dir / runs.CHECKPOINT).is_file():
             raise ConfigError(f"{run_dir} has no {runs.CHECKPOINT} to resume from; start it again without --resume")
@@ -349,13 +375,11 @@ def train(
     else:
         runs.new_run_dir(run_dir)
     settings = config["settings"]
-    threads = int(settings.get("torch_threads", 0))
-    if threads > 0:
-        torch.set_num_threads(threads)
+    configure_threads(settings, config.get("device", "auto"))
     env = make_vec_env(config, run_dir, _seed_base(int(config["seed"])), int(config["n_envs"]), append=resume)
     try:
         if resume:
-            model = _load_checkpoint(config, run_dir, env)
+            model = _load_checkpoint(config, run_dir, env, trust)
             model.tensorboard_log = str(run_dir / "tb")
         else:
             model = build_model(algo, settings, env, int(config["seed"]), run_dir / "tb", config.get("device", "auto"))

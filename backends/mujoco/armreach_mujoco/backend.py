@@ -148,8 +148,25 @@ NOSLIP_ITERATIONS = 10
 BODY_SOLREF_STEPS = 2.0
 BODY_SOLMIX = 100.0
 MODEL_CACHE_SIZE = 32
+#: MuJoCo warnings raised when a step diverges (it then resets the state to the model's defaults).
+_INSTABILITY_WARNINGS = (
+    mujoco.mjtWarning.mjWARN_BADQACC,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+    mujoco.mjtWarning.mjWARN_BADCTRL,
+)
 
 log = logging.getLogger("armreach.mujoco")
+
+
+def _log_warning(message: Any) -> None:
+    log.warning("mujoco: %s", str(message).strip())
+
+
+# MuJoCo's default warning handler prints and appends to MUJOCO_LOG.TXT in the current
+# folder; a diverging step (reported through Backend.diverged) would litter users' folders.
+if mujoco.get_mju_user_warning() is None:
+    mujoco.set_mju_user_warning(_log_warning)
 
 
 @dataclass(frozen=True)
@@ -274,7 +291,12 @@ def _links_without_inertial(robot: RobotModel) -> list[str]:
 
 
 def _build(robot: RobotModel, physics: PhysicsConfig, scene: _Scene) -> _Compiled:
-    spec = mujoco.MjSpec.from_string(_urdf_for_mujoco(robot))
+    try:
+        spec = mujoco.MjSpec.from_string(_urdf_for_mujoco(robot))
+    except ValueError as exc:  # MuJoCo's URDF importer refused the file
+        raise URDFError(
+            f"MuJoCo cannot read {robot.urdf_path}: {' '.join(str(exc).split())}; fix the element it names"
+        ) from None
     spec.modelname = robot.name
     spec.option.timestep = physics.timestep
     spec.option.gravity = list(physics.gravity)
@@ -387,7 +409,12 @@ def _build(robot: RobotModel, physics: PhysicsConfig, scene: _Scene) -> _Compile
         for geom in link_body.geoms:
             geom.friction = [friction, *list(geom.friction)[1:]]
 
-    model = spec.compile()
+    try:
+        model = spec.compile()
+    except ValueError as exc:  # e.g. an inertia MuJoCo rejects; the message names the body
+        raise URDFError(
+            f"MuJoCo cannot compile {robot.urdf_path}: {' '.join(str(exc).split())}; fix the element it names"
+        ) from None
     qpos = np.array([model.jnt_qposadr[model.joint(n).id] for n in robot.joint_names], dtype=np.intp)
     qvel = np.array([model.jnt_dofadr[model.joint(n).id] for n in robot.joint_names], dtype=np.intp)
     actuators = np.array([model.actuator(n).id for n in robot.joint_names], dtype=np.intp)
@@ -468,6 +495,7 @@ class MuJoCoBackend(Backend):
         self._renderer: Any = None
         self._renderer_size = (0, 0)
         self._closed = False
+        self._diverged = False
         self._load(compiled_model(robot, physics))
 
     def _load(self, compiled: _Compiled) -> None:
@@ -512,14 +540,24 @@ class MuJoCoBackend(Backend):
         data.qacc_warmstart[:] = 0.0
         data.ctrl[self._act] = values
         mujoco.mj_forward(self.model, data)
+        self._diverged = False
 
     def set_joint_targets(self, q: FloatArray) -> None:
         self.data.ctrl[self._act] = q
 
     def step(self) -> None:
+        # A diverging step makes MuJoCo reset mjData (warning counters included) and then
+        # count the warning that caused it: zero the counters, step, and look.
+        warnings = self.data.warning
+        for kind in _INSTABILITY_WARNINGS:
+            warnings[kind].number = 0
         mujoco.mj_step(self.model, self.data, nstep=self.physics.substeps)
+        self._diverged = any(warnings[kind].number > 0 for kind in _INSTABILITY_WARNINGS)
         # mj_step leaves xpos at the pose before its last integration: bring links up to qpos
         mujoco.mj_kinematics(self.model, self.data)
+
+    def diverged(self) -> bool:
+        return self._diverged
 
     # -- state -------------------------------------------------------------------------
     def joint_state(self) -> tuple[FloatArray, FloatArray]:

@@ -26,6 +26,8 @@ VELOCITY_GAIN = 1.0
 GROUND_RGBA = (0.86, 0.87, 0.89, 1.0)
 #: Where a body waits while its contact points are dropped (m), far from everything.
 PARKING = (0.0, 0.0, 1.0e4)
+#: PyBullet's number of client slots (MAX_PHYSICS_CLIENTS in its C API).
+MAX_CLIENTS = 1024
 
 log = logging.getLogger("armreach.pybullet")
 _libc = ctypes.CDLL(None)
@@ -141,6 +143,11 @@ class PyBulletBackend(Backend):
         self._forces = [j.effort for j in self.robot.joints]
         self._kp = [POSITION_GAIN] * self.robot.dof
         self._kd = [VELOCITY_GAIN] * self.robot.dof
+
+    @classmethod
+    def live_clients(cls) -> int:
+        """Connected PyBullet clients in this process (every backend holds one until closed)."""
+        return sum(1 for client in range(MAX_CLIENTS) if pb.isConnected(physicsClientId=client))
 
     # -- control -----------------------------------------------------------------------
     def reset_joints(self, q: npt.ArrayLike) -> None:

@@ -1,0 +1,238 @@
+"""Checks on a URDF's XML before any parser or engine interprets it.
+
+yourdfpy, PyBullet and MuJoCo each read a URDF's numbers with their own parser, and
+they disagree on what is not plainly a number (``nan``, ``1_000``, ``0x10``, ``1,2,3``,
+a missing component), and none of them is safe against every bad value: a duplicate
+joint name crashes PyBullet's loader (segmentation fault), a negative mass or a
+non-positive-definite inertia stops MuJoCo's compiler, a NaN origin gives NaN
+observations. :func:`check_tree` therefore checks every link and joint of the XML with
+one strict rule set, and raises :class:`~armreach_core.errors.URDFError` naming the
+element, the attribute and the fix:
+
+* numbers are plain decimals (``-1.5``, ``2e-3``), as many as the attribute needs,
+  finite, and at most :data:`MAX_MAGNITUDE` in size (metres, kilograms, radians);
+* masses, inertias' principal moments, damping and friction are not negative, and an
+  inertia tensor is positive semi-definite; geometry sizes are positive;
+* an ``<inertial>`` has both ``<mass>`` and ``<inertia>``; geometry has its sizes;
+* link and joint names are unique, joint types are URDF types, and a URDF has at most
+  :data:`MAX_LINKS` links.
+
+Extension blocks (``<gazebo>``, ``<transmission>``, ``<mujoco>``...) are not checked:
+no engine armreach drives reads them.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable
+
+import numpy as np
+from lxml import etree
+
+from armreach_core.errors import URDFError
+
+#: Largest magnitude accepted for a length (m), mass (kg), moment of inertia (kg·m²),
+#: angle (rad) or joint limit. Far beyond any robot, and small enough that squares and
+#: float32 observation bounds cannot overflow.
+MAX_MAGNITUDE = 1e6
+#: Most links a URDF may have (engines build every link; real arms have tens).
+MAX_LINKS = 1000
+#: Joint types the URDF format defines.
+URDF_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+
+_NUMBER = re.compile(r"^[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?$")
+_INERTIA = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+
+Element = etree._Element
+
+
+def _where(element: Element) -> str:
+    """``<tag>`` of the link or joint it belongs to, for messages."""
+    parts = []
+    node: Element | None = element
+    while node is not None and node.tag != "robot":
+        name = node.get("name")
+        tag = str(node.tag)
+        if node.tag in ("link", "joint") and name is not None:
+            parts.append(f"{tag} {name!r}")
+            break
+        parts.append(f"<{tag}>")
+        node = node.getparent()
+    return " of ".join(parts) if parts else f"<{element.tag}>"
+
+
+def _numbers(
+    element: Element,
+    attribute: str,
+    count: int,
+    *,
+    required: bool = False,
+    bound: float | None = MAX_MAGNITUDE,
+    minimum: float | None = None,
+    strictly: bool = False,
+) -> list[float] | None:
+    """The ``count`` numbers of ``element``'s ``attribute``, checked; ``None`` when absent."""
+    raw = element.get(attribute)
+    where = f"{attribute}={raw!r} of {_where(element)}"
+    if raw is None:
+        if required:
+            raise URDFError(f"{_where(element)} has no {attribute}= attribute; the URDF format requires it")
+        return None
+    parts = raw.split()
+    if len(parts) != count or not all(_NUMBER.match(p) for p in parts):
+        kind = "a number" if count == 1 else f"{count} numbers separated by spaces"
+        raise URDFError(f"{where} is not {kind}; write plain decimals such as 0.5 or 2e-3 (no nan, inf or commas)")
+    values = [float(p) for p in parts]
+    for value in values:
+        if not math.isfinite(value):  # a decimal too large for a double, such as 1e999
+            raise URDFError(f"{where} overflows a double; use a finite value")
+        if bound is not None and abs(value) > bound:
+            raise URDFError(f"{where} is beyond ±{bound:g}; no robot needs such a value, check the units")
+        if minimum is not None and (value <= minimum if strictly else value < minimum):
+            relation = ">" if strictly else ">="
+            raise URDFError(f"{where} must be {relation} {minimum:g}")
+    return values
+
+
+def _check_origin(parent: Element) -> None:
+    origin = parent.find("origin")
+    if origin is not None:
+        _numbers(origin, "xyz", 3)
+        _numbers(origin, "rpy", 3)
+
+
+def _check_geometry(holder: Element) -> None:
+    _check_origin(holder)
+    geometry = holder.find("geometry")
+    if geometry is None:
+        raise URDFError(f"{_where(holder)} has no <geometry>; add one or remove the element")
+    shapes = [child for child in geometry if isinstance(child.tag, str)]
+    if len(shapes) != 1:
+        raise URDFError(f"<geometry> of {_where(holder)} must hold exactly one shape, found {len(shapes)}")
+    shape = shapes[0]
+    if shape.tag == "box":
+        _numbers(shape, "size", 3, required=True, minimum=0.0, strictly=True)
+    elif shape.tag in ("cylinder", "capsule"):
+        _numbers(shape, "radius", 1, required=True, minimum=0.0, strictly=True)
+        _numbers(shape, "length", 1, required=True, minimum=0.0, strictly=True)
+    elif shape.tag == "sphere":
+        _numbers(shape, "radius", 1, required=True, minimum=0.0, strictly=True)
+    elif shape.tag == "mesh":
+        if not shape.get("filename"):
+            raise URDFError(f"<mesh> of {_where(holder)} has no filename= attribute")
+        scale = _numbers(shape, "scale", 3)
+        if scale is not None and any(s == 0.0 for s in scale):
+            raise URDFError(f"scale={shape.get('scale')!r} of {_where(shape)} has a zero factor; use non-zero factors")
+    else:
+        raise URDFError(f"{_where(shape)} is not a URDF shape; use box, cylinder, sphere or mesh")
+    material = holder.find("material")
+    if material is not None:
+        color = material.find("color")
+        if color is not None:
+            _numbers(color, "rgba", 4)
+
+
+def _check_inertial(inertial: Element) -> None:
+    _check_origin(inertial)
+    mass = inertial.find("mass")
+    inertia = inertial.find("inertia")
+    if mass is None or inertia is None:
+        missing = "<mass value=...>" if mass is None else "<inertia ixx=... izz=...>"
+        raise URDFError(f"{_where(inertial)} has no {missing}; an <inertial> needs both <mass> and <inertia>")
+    _numbers(mass, "value", 1, required=True, minimum=0.0)
+    values = {}
+    for key in _INERTIA:
+        number = _numbers(inertia, key, 1, required=True)
+        assert number is not None
+        values[key] = number[0]
+    tensor = np.array(
+        [
+            [values["ixx"], values["ixy"], values["ixz"]],
+            [values["ixy"], values["iyy"], values["iyz"]],
+            [values["ixz"], values["iyz"], values["izz"]],
+        ]
+    )
+    eigenvalues = np.linalg.eigvalsh(tensor)
+    if eigenvalues[0] < -1e-12 - 1e-9 * abs(eigenvalues[-1]):
+        raise URDFError(
+            f"<inertia> of {_where(inertial)} is not positive semi-definite (principal moments "
+            f"{', '.join(f'{e:.3g}' for e in eigenvalues)} kg·m²); a rigid body's moments are >= 0: "
+            "fix the signs of the products (ixy, ixz, iyz) or the diagonal"
+        )
+
+
+def _check_link(link: Element) -> None:
+    inertial = link.find("inertial")
+    if inertial is not None:
+        _check_inertial(inertial)
+    for holder in (*link.findall("visual"), *link.findall("collision")):
+        _check_geometry(holder)
+
+
+def _check_joint(joint: Element) -> None:
+    kind = joint.get("type")
+    if kind not in URDF_JOINT_TYPES:
+        raise URDFError(f"{_where(joint)} has type {kind!r}; URDF joint types are {', '.join(URDF_JOINT_TYPES)}")
+    for end in ("parent", "child"):
+        found = joint.findall(end)
+        if len(found) != 1 or not found[0].get("link"):
+            raise URDFError(f"{_where(joint)} needs exactly one <{end} link=...>, found {len(found)}")
+    _check_origin(joint)
+    axis = joint.find("axis")
+    if axis is not None:
+        xyz = _numbers(axis, "xyz", 3)
+        if xyz is not None and kind not in ("fixed", "floating") and not any(xyz):
+            raise URDFError(f"<axis xyz='0 0 0'> of {_where(joint)} has no direction; give the joint's unit axis")
+    limit = joint.find("limit")
+    if limit is not None:
+        lower = _numbers(limit, "lower", 1)
+        upper = _numbers(limit, "upper", 1)
+        _numbers(limit, "effort", 1, bound=None)
+        _numbers(limit, "velocity", 1, bound=None)
+        if lower is not None and upper is not None and lower[0] > upper[0] and kind in ("revolute", "prismatic"):
+            raise URDFError(f"<limit> of {_where(joint)} has lower {lower[0]} > upper {upper[0]}; swap them")
+    dynamics = joint.find("dynamics")
+    if dynamics is not None:
+        _numbers(dynamics, "damping", 1, bound=None, minimum=0.0)
+        _numbers(dynamics, "friction", 1, bound=None, minimum=0.0)
+    mimic = joint.find("mimic")
+    if mimic is not None:
+        _numbers(mimic, "multiplier", 1)
+        _numbers(mimic, "offset", 1)
+    safety = joint.find("safety_controller")
+    if safety is not None:
+        for key in ("soft_lower_limit", "soft_upper_limit", "k_position", "k_velocity"):
+            _numbers(safety, key, 1, bound=None)
+
+
+def _unique(elements: Iterable[Element], kind: str) -> None:
+    seen: set[str] = set()
+    for element in elements:
+        name = element.get("name")
+        if not name:
+            raise URDFError(f"a <{kind}> has no name= attribute; every {kind} needs a unique name")
+        if name in seen:
+            raise URDFError(f"{kind} name {name!r} is used twice; {kind} names must be unique")
+        seen.add(name)
+
+
+def check_tree(root: Element) -> None:
+    """Check every ``<link>`` and ``<joint>`` of a URDF's ``<robot>`` element.
+
+    Raises:
+        URDFError: the first problem found, naming the element and the fix.
+    """
+    links = root.findall("link")
+    joints = root.findall("joint")
+    for kind, elements in (("links", links), ("joints", joints)):
+        if len(elements) > MAX_LINKS:
+            raise URDFError(
+                f"the URDF has {len(elements)} {kind}, over armreach's limit of {MAX_LINKS}; is it a robot arm?"
+            )
+    _unique(links, "link")
+    _unique(joints, "joint")
+    for link in links:
+        _check_link(link)
+    for joint in joints:
+        _check_joint(joint)
