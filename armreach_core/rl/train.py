@@ -93,9 +93,7 @@ def resolve_config(
     total = int(steps if steps is not None else settings.get("timesteps", 100_000))
     if total < 1 and algo != "ik":
         raise ConfigError(f"--steps must be positive, got {total}")
-    if algo == "ppo":
-        rollout = int(settings.get("n_steps", 2048)) * envs
-        total = -(-total // rollout) * rollout
+    total = _whole_rollouts(algo, settings, envs, total)
     if eval_max_episode_steps < 1:
         raise ConfigError(f"the evaluation episode limit must be positive, got {eval_max_episode_steps}")
     return {
@@ -119,11 +117,16 @@ def extend(config: dict[str, Any], steps: int) -> dict[str, Any]:
     """``config`` with a new total (``--resume --steps``), rounded up to whole PPO rollouts."""
     if steps < 1:
         raise ConfigError(f"--steps must be positive, got {steps}")
-    total = int(steps)
-    if config["algo"] == "ppo":
-        rollout = int(config["settings"].get("n_steps", 2048)) * int(config["n_envs"])
-        total = -(-total // rollout) * rollout
+    total = _whole_rollouts(config["algo"], config["settings"], int(config["n_envs"]), int(steps))
     return {**config, "timesteps": total}
+
+
+def _whole_rollouts(algo: str, settings: dict[str, Any], n_envs: int, total: int) -> int:
+    """``total`` rounded up to whole PPO rollouts (``n_steps × n_envs``), what SB3 trains; others unchanged."""
+    if algo != "ppo":
+        return total
+    rollout = int(settings.get("n_steps", 2048)) * n_envs
+    return -(-total // rollout) * rollout
 
 
 #: Settings that change how fast a run goes, not what it learns.
