@@ -18,6 +18,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import ClassVar
 
 import numpy as np
@@ -97,6 +98,10 @@ class BodyState:
 
     def _values(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         return self.position, self.orientation, self.linear_velocity, self.angular_velocity
+
+
+#: The ``objects`` of a state with no free bodies (read-only, so it can be shared).
+NO_OBJECTS: Mapping[str, BodyState] = MappingProxyType({})
 
 
 @dataclass(frozen=True)

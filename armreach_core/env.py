@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import inspect
+import math
 import os
 from pathlib import Path
 from typing import Any, SupportsFloat
@@ -200,7 +201,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         except TypeError as exc:
             raise ConfigError(f"bad option for task {task!r}: {exc}") from exc
 
-        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.task.action_size(),), dtype=np.float32)
+        self._action_shape = (self.task.action_size(),)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=self._action_shape, dtype=np.float32)
         self.observation_space = self.task.observation_space()
         if isinstance(self.observation_space, gym.spaces.Dict) and "desired_goal" in self.observation_space.spaces:
             # Only goal-conditioned envs expose these (SB3 and HER detect them by name):
@@ -225,6 +227,16 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
 
     def _check_action(self, action: Any) -> npt.NDArray[np.float64]:
         """The action as float64, clipped into [-1, 1]; :class:`ActionError` if it is not a usable action."""
+        if type(action) is np.ndarray and action.shape == self._action_shape and action.dtype.kind == "f":
+            arr = action.astype(np.float64)  # the common case, checked in a fraction of the general path
+        else:
+            arr = self._convert_action(action)
+        # A finite sum means finite values (a sum that overflows goes on to the exact check).
+        if not math.isfinite(sum(arr.tolist())) and not np.isfinite(arr).all():
+            raise ActionError(f"action contains NaN or inf: {arr.tolist()}; the env's state is unchanged")
+        return np.minimum(np.maximum(arr, -1.0, out=arr), 1.0, out=arr)
+
+    def _convert_action(self, action: Any) -> npt.NDArray[np.float64]:
         try:
             raw = np.asarray(action)
         except Exception as exc:  # ragged sequences, objects whose __array__ raises
@@ -234,18 +246,15 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
                 f"action has dtype {raw.dtype} ({raw.dtype.kind!r}); it must hold real numbers (float or int), "
                 "not booleans, complex numbers, strings or objects; the env's state is unchanged"
             )
-        arr = raw.astype(np.float64)
-        size = self.task.action_size()
-        if arr.shape != (size,):
+        if raw.shape != self._action_shape:
+            size = self._action_shape[0]
             what = (
                 f"one value in [-1, 1] per joint {list(self.robot.joint_names)}"
                 if size == self.robot.dof
                 else f"values in [-1, 1] as task {self.task_name!r} defines them"
             )
-            raise ActionError(f"action has shape {arr.shape}, expected ({size},): {what}")
-        if not np.isfinite(arr).all():
-            raise ActionError(f"action contains NaN or inf: {arr.tolist()}; the env's state is unchanged")
-        return np.minimum(np.maximum(arr, -1.0), 1.0)
+            raise ActionError(f"action has shape {raw.shape}, expected ({size},): {what}")
+        return raw.astype(np.float64)
 
     # -- Gymnasium API -----------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
@@ -266,12 +275,11 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         if self._state is None:
             raise ArmReachError("call reset() before step()")
         target = self.task.joint_targets(self._check_action(action), self._state.q, self.max_joint_step)
-        lower, upper = self.robot.lower, self.robot.upper
-        violated = bool((target < lower).any() or (target > upper).any())
-        if violated:
-            target = np.minimum(np.maximum(target, lower), upper)
+        clipped = np.minimum(np.maximum(target, self.robot.lower), self.robot.upper)
+        excess = target - clipped
+        violated = bool(excess.dot(excess) > 0.0)  # one call instead of two comparisons and reductions
         backend = self.backend
-        backend.set_joint_targets(target)
+        backend.set_joint_targets(clipped)
         backend.step()
         state, unstable = self._checked_state(backend, self._state)
         self._state = state
@@ -296,8 +304,12 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         stay finite while the episode ends.
         """
         state = backend.read_state()
-        values = np.concatenate((state.q, state.qd, state.ee_pos))
-        sane = bool((np.abs(values) <= STATE_LIMIT).all())  # False for NaN too
+        # Fast test first: a sum of magnitudes within STATE_LIMIT bounds each of them (NaN fails it).
+        if sum(map(abs, state.q.tolist() + state.qd.tolist() + state.ee_pos.tolist())) <= STATE_LIMIT:
+            sane = True
+        else:
+            values = np.concatenate((state.q, state.qd, state.ee_pos))
+            sane = bool((np.abs(values) <= STATE_LIMIT).all())  # False for NaN too
         if state.objects:
             sane = sane and all(body.is_finite() for body in state.objects.values())
         if sane and not backend.diverged():

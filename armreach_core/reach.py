@@ -18,6 +18,7 @@ Reward:
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -95,11 +96,28 @@ class ReachTask(Task):
                     f"{self.sampler.center.tolist()} at least {min_target_height} m high; move target_center "
                     f"inside the arm's reach (about {self.sampler.map.reach:.2f} m) or enlarge target_radius"
                 )
-        self.target: FloatArray = self.sampler.center.copy()
+        self._flat = np.zeros(2 * robot.dof + 9)  # the flat observation, filled in place
+        self.target = self.sampler.center.copy()
         reach = self.sampler.map.reach
         self._components = self._layout(reach)
         self._low = np.concatenate([c.low for c in self._components]).astype(np.float32)
         self._high = np.concatenate([c.high for c in self._components]).astype(np.float32)
+        # the bounds the float64 observation is clipped to before it becomes float32
+        self._low64, self._high64 = self._low.astype(np.float64), self._high.astype(np.float64)
+
+    @property
+    def target(self) -> FloatArray:
+        """The episode's target (m, base frame)."""
+        return self._target
+
+    @target.setter
+    def target(self, value: npt.ArrayLike) -> None:
+        self._target: FloatArray = np.array(value, dtype=np.float64)
+        n = self.robot.dof
+        self._flat[n + 3 : n + 6] = self._target
+        # the float32 goal the agent observes, as Python floats for the per-step distance
+        goal = self._target.astype(np.float32).tolist()
+        self._goal: tuple[float, float, float] = (goal[0], goal[1], goal[2])
 
     # -- spaces ------------------------------------------------------------------------
     def _layout(self, reach: float) -> list[Component]:
@@ -153,17 +171,26 @@ class ReachTask(Task):
                 "achieved_goal": state.ee_pos.astype(np.float32),
                 "desired_goal": self.target.astype(np.float32),
             }
-        flat = np.concatenate((state.q, state.ee_pos, self.target, state.qd, self.target - state.ee_pos))
-        return np.minimum(np.maximum(flat, self._low), self._high).astype(np.float32)
+        flat, n = self._flat, self.robot.dof  # [θ, p_e, p_t, θ̇, p_t − p_e]; p_t is set per episode
+        flat[:n] = state.q
+        flat[n : n + 3] = state.ee_pos
+        flat[n + 6 : 2 * n + 6] = state.qd
+        np.subtract(self._target, state.ee_pos, out=flat[2 * n + 6 :])
+        np.maximum(flat, self._low64, out=flat)
+        return np.minimum(flat, self._high64, out=flat).astype(np.float32)
 
     def evaluate(self, state: ArmState) -> Evaluation:
         # Scored from the float32 goals the agent observes, so that the invariant
-        # reward == compute_reward(achieved_goal, desired_goal, info) holds exactly.
-        d = self._distance(state.ee_pos.astype(np.float32), self.target.astype(np.float32))
-        distance = float(d)
+        # reward == compute_reward(achieved_goal, desired_goal, info) holds exactly: the
+        # same float64 operations as _distance and _reward, in the same order, on Python
+        # floats (numpy's per-call cost on three numbers is most of an env step's overhead).
+        ex, ey, ez = state.ee_pos.astype(np.float32).tolist()
+        gx, gy, gz = self._goal
+        dx, dy, dz = ex - gx, ey - gy, ez - gz
+        distance = math.sqrt(dx * dx + dy * dy + dz * dz)  # left to right, as numpy adds three values
         success = distance < self.success_threshold
-        reward = float(self._reward(d))
         bonus = self.success_bonus if success else 0.0
+        reward = -float(self._power(distance)) + bonus
         info = {"distance": distance, "is_success": success, "reward_distance": reward - bonus, "reward_success": bonus}
         return Evaluation(reward=reward, success=success, info=info)
 
@@ -173,10 +200,24 @@ class ReachTask(Task):
         # What np.linalg.norm(diff, axis=-1) computes, without its dispatch overhead.
         return np.asarray(np.sqrt(np.add.reduce(diff * diff, axis=-1)))
 
+    def _power(self, distance: Any) -> Any:
+        """``distance ** p`` for a float or an array, rounded identically for both.
+
+        Whole exponents up to 3 multiply (each product is correctly rounded, in Python and
+        numpy alike); others use numpy's power, whose vectorized loop can differ from the C
+        library's ``pow`` in the last bit, for floats too.
+        """
+        p = self.distance_exponent
+        if p == 1.0:
+            return distance
+        if p == 2.0:
+            return distance * distance
+        if p == 3.0:
+            return distance * distance * distance
+        return np.power(distance, p)
+
     def _reward(self, distance: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        return np.asarray(
-            -(distance**self.distance_exponent) + self.success_bonus * (distance < self.success_threshold)
-        )
+        return np.asarray(-self._power(distance) + self.success_bonus * (distance < self.success_threshold))
 
     def compute_reward(
         self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any

@@ -95,6 +95,30 @@ def test_reward_cases_by_hand(env):
     assert not hasattr(env.unwrapped, "compute_reward")  # a flat env is not a goal env
 
 
+@pytest.mark.parametrize("exponent", [3.0, 1.0, 2.0, 2.5, 0.5])
+def test_step_reward_equals_batch_compute_reward_bit_for_bit(exponent):
+    """evaluate() scores one state with Python floats; compute_reward() batches with numpy: same bits."""
+    env = ArmReach6DOFEnv(backend=BACKENDS[0], distance_exponent=exponent)
+    task = env.unwrapped.task
+    rng = np.random.default_rng(7)
+    achieved, desired, rewards, distances = [], [], [], []
+    for _ in range(2000):
+        task.target = rng.uniform(-1, 1, 3)
+        ee = task.target + rng.normal(size=3) * 10.0 ** rng.uniform(-4, 0.5)
+        evaluation = task.evaluate(ArmState(np.zeros(6), np.zeros(6), ee))
+        achieved.append(ee.astype(np.float32))
+        desired.append(task.target.astype(np.float32))
+        rewards.append(evaluation.reward)
+        distances.append(evaluation.info["distance"])
+    env.close()
+    batch = task.compute_reward(np.array(achieved), np.array(desired), {})
+    np.testing.assert_array_equal(batch, rewards)
+    np.testing.assert_array_equal(task._distance(np.array(achieved), np.array(desired)), distances)
+    np.testing.assert_array_equal(
+        task.compute_terminated(np.array(achieved), np.array(desired), {}), np.array(distances) < 0.05
+    )
+
+
 def test_success_terminates_with_bonus(env):
     env.reset(seed=0)
     unwrapped = env.unwrapped
@@ -262,10 +286,16 @@ def test_actions_of_the_wrong_dtype_raise_and_leave_state_untouched(env, bad):
     np.testing.assert_array_equal(env.step(np.ones(6))[0], clipped)
 
 
-def test_a_physics_blow_up_ends_the_episode_and_says_so(backend):
-    """NaN put into the engine's own joint state (public backend API, real engine) must not escape."""
+@pytest.mark.parametrize("steps_before", [0, 7])
+def test_a_physics_blow_up_ends_the_episode_and_says_so(backend, steps_before):
+    """NaN put into the engine's own joint state (public backend API, real engine) must not escape.
+
+    Also after some steps: MuJoCo's backend then tells a repaired step by its clock, not its warnings.
+    """
     env = ArmReach6DOFEnv(backend=backend)
     env.reset(seed=0)
+    for _ in range(steps_before):
+        assert not env.step(np.zeros(6, dtype=np.float32))[2]
     env.unwrapped.backend.reset_joints(np.full(6, np.nan))
     obs, reward, terminated, truncated, info = env.step(np.zeros(6, dtype=np.float32))
     assert terminated and not truncated
