@@ -99,6 +99,22 @@ def test_train_then_evaluate(tmp_path: Path, tiny: str, algo: str, extra: list[s
         assert np.isfinite(float(e["episode_return"]))
 
 
+@pytest.mark.parametrize("algo", ["ddpg", "td3", "sac"])
+def test_off_policy_agents_use_fused_adam_also_after_loading(tmp_path: Path, tiny: str, algo: str) -> None:
+    from armreach_core.rl.agents import algo_class, build_model, make_vec_env
+    from armreach_core.rl.train import resolve_config
+
+    config = resolve_config(algo=algo, preset=tiny)
+    env = make_vec_env(config, tmp_path, 0, 1, append=False)
+    model = build_model(algo, config["settings"], env, 0, None, "cpu")
+    model.save(tmp_path / "model.zip")
+    loaded = algo_class(algo).load(tmp_path / "model.zip", env=env, device="cpu")
+    for agent in (model, loaded):
+        assert agent.actor.optimizer.defaults["fused"] is True
+        assert agent.critic.optimizer.defaults["fused"] is True
+    env.close()
+
+
 def test_ik_reference_reaches_every_target(tmp_path: Path) -> None:
     run_dir = tmp_path / "ik"
     assert main(["train", "--algo", "ik", "--out", str(run_dir)]) == 0

@@ -17,7 +17,7 @@ from collections.abc import Iterator
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.backend import Backend, BodyState, Camera, PhysicsConfig
+from armreach_core.backend import NO_OBJECTS, ArmState, Backend, BodyState, Camera, PhysicsConfig
 from armreach_core.errors import ArmReachError, URDFError
 from armreach_core.robot import FloatArray, RobotModel
 
@@ -179,6 +179,14 @@ class PyBulletBackend(Backend):
         q = np.array([s[0] for s in states])
         qd = np.array([s[1] for s in states])
         return q, qd
+
+    def read_state(self) -> ArmState:
+        if self._free or self._ee < 0:
+            return super().read_state()
+        cid, body = self._client, self._body
+        states = pb.getJointStates(body, self._joints, physicsClientId=cid)
+        ee = pb.getLinkState(body, self._ee, computeForwardKinematics=True, physicsClientId=cid)[4]
+        return ArmState(np.array([s[0] for s in states]), np.array([s[1] for s in states]), np.array(ee), NO_OBJECTS)
 
     def link_position(self, link: str) -> FloatArray:
         try:
