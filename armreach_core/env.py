@@ -231,9 +231,13 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             arr = action.astype(np.float64)  # the common case, checked in a fraction of the general path
         else:
             arr = self._convert_action(action)
+        values = arr.tolist()
         # A finite sum means finite values (a sum that overflows goes on to the exact check).
-        if not math.isfinite(sum(arr.tolist())) and not np.isfinite(arr).all():
-            raise ActionError(f"action contains NaN or inf: {arr.tolist()}; the env's state is unchanged")
+        if math.isfinite(sum(values)):
+            if min(values) >= -1.0 and max(values) <= 1.0:
+                return arr  # nothing to clip: most actions, without a numpy call
+        elif not np.isfinite(arr).all():
+            raise ActionError(f"action contains NaN or inf: {values}; the env's state is unchanged")
         return np.minimum(np.maximum(arr, -1.0, out=arr), 1.0, out=arr)
 
     def _convert_action(self, action: Any) -> npt.NDArray[np.float64]:

@@ -96,7 +96,15 @@ class ReachTask(Task):
                     f"{self.sampler.center.tolist()} at least {min_target_height} m high; move target_center "
                     f"inside the arm's reach (about {self.sampler.map.reach:.2f} m) or enlarge target_radius"
                 )
-        self._flat = np.zeros(2 * robot.dof + 9)  # the flat observation, filled in place
+        # The flat observation [θ, p_e, p_t, θ̇, p_t − p_e], filled in place through views of its parts.
+        n = robot.dof
+        self._flat = np.zeros(2 * n + 9)
+        self._flat_parts = (
+            self._flat[:n],
+            self._flat[n : n + 3],
+            self._flat[n + 6 : 2 * n + 6],
+            self._flat[2 * n + 6 :],
+        )
         self.target = self.sampler.center.copy()
         reach = self.sampler.map.reach
         self._components = self._layout(reach)
@@ -114,7 +122,7 @@ class ReachTask(Task):
     def target(self, value: npt.ArrayLike) -> None:
         self._target: FloatArray = np.array(value, dtype=np.float64)
         n = self.robot.dof
-        self._flat[n + 3 : n + 6] = self._target
+        self._flat[n + 3 : n + 6] = self._target  # once per episode, not per step
         # the float32 goal the agent observes, as Python floats for the per-step distance
         goal = self._target.astype(np.float32).tolist()
         self._goal: tuple[float, float, float] = (goal[0], goal[1], goal[2])
@@ -171,11 +179,11 @@ class ReachTask(Task):
                 "achieved_goal": state.ee_pos.astype(np.float32),
                 "desired_goal": self.target.astype(np.float32),
             }
-        flat, n = self._flat, self.robot.dof  # [θ, p_e, p_t, θ̇, p_t − p_e]; p_t is set per episode
-        flat[:n] = state.q
-        flat[n : n + 3] = state.ee_pos
-        flat[n + 6 : 2 * n + 6] = state.qd
-        np.subtract(self._target, state.ee_pos, out=flat[2 * n + 6 :])
+        flat, (q, ee, qd, delta) = self._flat, self._flat_parts  # p_t is written once per episode
+        q[...] = state.q
+        ee[...] = state.ee_pos
+        qd[...] = state.qd
+        np.subtract(self._target, state.ee_pos, out=delta)
         np.maximum(flat, self._low64, out=flat)
         return np.minimum(flat, self._high64, out=flat).astype(np.float32)
 
@@ -192,7 +200,7 @@ class ReachTask(Task):
         bonus = self.success_bonus if success else 0.0
         reward = -float(self._power(distance)) + bonus
         info = {"distance": distance, "is_success": success, "reward_distance": reward - bonus, "reward_success": bonus}
-        return Evaluation(reward=reward, success=success, info=info)
+        return Evaluation(reward, success, info)
 
     # -- pure, batch-friendly ----------------------------------------------------------
     def _distance(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike) -> npt.NDArray[np.float64]:
