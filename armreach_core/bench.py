@@ -134,11 +134,14 @@ def bench_vector(backend: str, workers: int, steps: int) -> float:
         vec.close()
 
 
-def bench_sb3(backend: str, algo: str, steps: int, threads: int | None = None) -> float:
+def bench_sb3(
+    backend: str, algo: str, steps: int, threads: int | None = None, settings: dict[str, Any] | None = None
+) -> float:
     """Env steps/s while training ``algo`` with the paper preset (after its warm-up).
 
     ``threads``: torch CPU threads; default what ``armreach train`` uses (see
-    :func:`armreach_core.rl.train.configure_threads`).
+    :func:`armreach_core.rl.train.configure_threads`). ``settings``: preset values to
+    change, e.g. ``{"train_freq": 4, "gradient_steps": 1}``.
     """
     import tempfile
     from pathlib import Path
@@ -147,6 +150,7 @@ def bench_sb3(backend: str, algo: str, steps: int, threads: int | None = None) -
     from armreach_core.rl.train import configure_threads, resolve_config
 
     config = resolve_config(algo=algo, preset="paper", backend=backend)
+    config["settings"].update(settings or {})
     if threads is not None:
         config["settings"]["torch_threads"] = threads
     configure_threads(config["settings"], "cpu")
