@@ -206,7 +206,13 @@ def _mutate_inertial(draw: st.DrawFn, root: etree._Element) -> str:
     inertial = link.find("inertial")
     kind = draw(st.sampled_from(["negative mass", "zero mass", "zero", "degenerate", "negative", "triangle",
                                  "products", "tiny", "huge"]))  # fmt: skip
-    mass, inertia = inertial.find("mass"), inertial.find("inertia")
+    # an earlier mutation of the same URDF may have deleted either element
+    mass = inertial.find("mass")
+    if mass is None:
+        mass = etree.SubElement(inertial, "mass", value="1")
+    inertia = inertial.find("inertia")
+    if inertia is None:
+        inertia = etree.SubElement(inertial, "inertia")
     values = {
         "zero": ["0"] * 6,
         "degenerate": ["1", "0", "0", "0", "0", "0"],
