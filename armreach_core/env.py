@@ -278,11 +278,11 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         if self._state is None:
             raise ArmReachError("call reset() before step()")
+        backend = self.backend
         target = self.task.joint_targets(self._check_action(action), self._state.q, self.max_joint_step)
         clipped = np.minimum(np.maximum(target, self.robot.lower), self.robot.upper)
         excess = target - clipped
         violated = bool(excess.dot(excess) > 0.0)  # one call instead of two comparisons and reductions
-        backend = self.backend
         backend.set_joint_targets(clipped)
         backend.step()
         state, unstable = self._checked_state(backend, self._state)

@@ -505,6 +505,13 @@ class MuJoCoBackend(Backend):
         self.data = mujoco.MjData(self.model)
         self._qpos, self._qvel, self._act = compiled.qpos, compiled.qvel, compiled.actuators
         self._ee = compiled.bodies[self.robot.ee_link]
+        # MjData's arrays, fetched once (each attribute access costs a binding call)
+        self._ctrl, self._qpos_all, self._qvel_all, self._xpos = (
+            self.data.ctrl,
+            self.data.qpos,
+            self.data.qvel,
+            self.data.xpos,
+        )
         self._half_dt = 0.5 * self.model.opt.timestep
         # what the clock advances by in one control step, less half a physics step of slack
         self._step_span = (self.physics.substeps - 0.5) * self.model.opt.timestep
@@ -547,7 +554,7 @@ class MuJoCoBackend(Backend):
         self._diverged = False
 
     def set_joint_targets(self, q: FloatArray) -> None:
-        self.data.ctrl[self._act] = q
+        self._ctrl[self._act] = q
 
     def step(self) -> None:
         # A diverging step makes MuJoCo reset mjData, its clock included: the clock then lags
@@ -581,10 +588,9 @@ class MuJoCoBackend(Backend):
         return self.data.qpos[self._qpos], self.data.qvel[self._qvel]  # index arrays: copies
 
     def read_state(self) -> ArmState:
-        data = self.data
         if self._compiled.free:
             return super().read_state()
-        return ArmState(data.qpos[self._qpos], data.qvel[self._qvel], data.xpos[self._ee].copy(), NO_OBJECTS)
+        return ArmState(self._qpos_all[self._qpos], self._qvel_all[self._qvel], self._xpos[self._ee].copy(), NO_OBJECTS)
 
     def link_position(self, link: str) -> FloatArray:
         try:
@@ -598,13 +604,13 @@ class MuJoCoBackend(Backend):
         lower, upper = self.robot.lower, self.robot.upper
         act, qpos_index, qvel_index = self._act, self._qpos, self._qvel
         ee = self._compiled.bodies[self.robot.ee_link]
-        q = data.qpos[qpos_index].copy()
+        q = data.qpos[qpos_index]  # indexing with an array copies
         for delta in deltas:
-            data.ctrl[act] = np.clip(q + delta, lower, upper)
+            data.ctrl[act] = np.minimum(np.maximum(q + delta, lower), upper)
             mujoco.mj_step(model, data, nstep=substeps)
             mujoco.mj_kinematics(model, data)
-            q = data.qpos[qpos_index].copy()
-            _qd = data.qvel[qvel_index].copy()
+            q = data.qpos[qpos_index]
+            _qd = data.qvel[qvel_index]
             _ee = data.xpos[ee].copy()
 
     # -- markers and rendering -----------------------------------------------------------

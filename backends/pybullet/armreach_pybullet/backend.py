@@ -205,8 +205,9 @@ class PyBulletBackend(Backend):
         forces, kp, kd, control = self._forces, self._kp, self._kd, pb.POSITION_CONTROL
         q = np.array([s[0] for s in pb.getJointStates(body, joints, physicsClientId=cid)])
         for delta in deltas:
+            target = np.minimum(np.maximum(q + delta, lower), upper)
             pb.setJointMotorControlArray(
-                body, joints, control, targetPositions=np.clip(q + delta, lower, upper).tolist(), forces=forces,
+                body, joints, control, targetPositions=target.tolist(), forces=forces,
                 positionGains=kp, velocityGains=kd, physicsClientId=cid,
             )  # fmt: skip
             for _ in range(substeps):
