@@ -118,7 +118,7 @@ def build_model(algo: str, settings: dict[str, Any], env: Any, seed: int, tb_dir
         policy_name = "MlpPolicy"
     else:
         # Adam's fused kernel: one call per parameter group instead of a dozen small tensor
-        # operations per parameter (DDPG on 2 cores: 80 -> 90 env steps/s, docs/benchmarks.md).
+        # operations per parameter (DDPG on 2 cores: 69 -> 74-79 env steps/s, docs/benchmarks.md).
         policy_kwargs["optimizer_kwargs"] = {"fused": True}
         for key in ("tau", "buffer_size", "learning_starts", "gradient_steps"):
             if key in settings:

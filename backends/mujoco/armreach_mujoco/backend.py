@@ -585,12 +585,13 @@ class MuJoCoBackend(Backend):
 
     # -- state -------------------------------------------------------------------------
     def joint_state(self) -> tuple[FloatArray, FloatArray]:
-        return self.data.qpos[self._qpos], self.data.qvel[self._qvel]  # index arrays: copies
+        return self._qpos_all[self._qpos], self._qvel_all[self._qvel]  # index arrays: copies
 
     def read_state(self) -> ArmState:
         if self._compiled.free:
             return super().read_state()
-        return ArmState(self._qpos_all[self._qpos], self._qvel_all[self._qvel], self._xpos[self._ee].copy(), NO_OBJECTS)
+        q, qd = self.joint_state()
+        return ArmState(q, qd, self._xpos[self._ee].copy(), NO_OBJECTS)
 
     def link_position(self, link: str) -> FloatArray:
         try:

@@ -183,10 +183,9 @@ class PyBulletBackend(Backend):
     def read_state(self) -> ArmState:
         if self._free or self._ee < 0:
             return super().read_state()
-        cid, body = self._client, self._body
-        states = pb.getJointStates(body, self._joints, physicsClientId=cid)
-        ee = pb.getLinkState(body, self._ee, computeForwardKinematics=True, physicsClientId=cid)[4]
-        return ArmState(np.array([s[0] for s in states]), np.array([s[1] for s in states]), np.array(ee), NO_OBJECTS)
+        q, qd = self.joint_state()
+        ee = pb.getLinkState(self._body, self._ee, computeForwardKinematics=True, physicsClientId=self._client)[4]
+        return ArmState(q, qd, np.array(ee), NO_OBJECTS)
 
     def link_position(self, link: str) -> FloatArray:
         try:
