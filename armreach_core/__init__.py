@@ -13,6 +13,7 @@ from armreach_core.errors import (
     ArmReachError,
     BackendUnavailableError,
     ConfigError,
+    MissingExtraError,
     PluginError,
     URDFError,
 )
@@ -45,6 +46,7 @@ __all__ = [
     "BodyState",
     "Camera",
     "ConfigError",
+    "MissingExtraError",
     "PhysicsConfig",
     "PluginError",
     "RobotModel",

@@ -5,11 +5,10 @@ A backend adapts one engine to armreach and holds no task logic. It is built fro
 names: joint vectors are always in ``robot.joint_names`` order. Units are SI, z is up,
 and quaternions (where a backend exposes orientation) are ``(w, x, y, z)``.
 
-Tasks that handle objects (grasping) also use *bodies*: boxes added to the world by
-name (:meth:`Backend.add_box`), free or fixed, whose pose and velocity a backend sets and
-reads, and contacts and friction addressed by robot link or body name. These methods
-have defaults that raise :class:`NotImplementedError`, so a backend written for reaching
-alone keeps working.
+Tasks see a backend as a :class:`Scene`: markers, and for tasks that handle objects
+(grasping) *bodies*: boxes added to the world by name, free or fixed, whose pose and
+velocity a backend sets and reads, and contacts and friction addressed by robot link or
+body name.
 """
 
 from __future__ import annotations
@@ -121,35 +120,16 @@ class ArmState:
         return arm and all(body.is_finite() for body in self.objects.values())
 
 
-class Backend(ABC):
-    """One physics engine, one robot, one world. Subclasses register through a plugin."""
+class Scene(ABC):
+    """The part of a backend a task may use: markers, and bodies with their contacts.
+
+    Every signature is declared here once; :class:`Backend` extends it. Body methods have
+    defaults that raise :class:`NotImplementedError`, so a backend written for reaching
+    alone keeps working.
+    """
 
     #: The name users pass as ``backend=``.
     name: ClassVar[str]
-
-    def __init__(self, robot: RobotModel, physics: PhysicsConfig) -> None:
-        self.robot = robot
-        self.physics = physics
-
-    @abstractmethod
-    def reset_joints(self, q: npt.ArrayLike) -> None:
-        """Teleport the arm to ``q`` with zero velocity and hold it there (position targets = ``q``)."""
-
-    @abstractmethod
-    def set_joint_targets(self, q: FloatArray) -> None:
-        """Set position-control targets (rad or m), one per actuated joint."""
-
-    @abstractmethod
-    def step(self) -> None:
-        """Advance one control step: ``physics.substeps`` physics steps."""
-
-    @abstractmethod
-    def joint_state(self) -> tuple[FloatArray, FloatArray]:
-        """Joint positions and velocities of the actuated joints."""
-
-    @abstractmethod
-    def link_position(self, link: str) -> FloatArray:
-        """World position of a link's URDF frame."""
 
     @abstractmethod
     def add_marker(self, name: str, radius: float, rgba: tuple[float, float, float, float]) -> None:
@@ -159,44 +139,6 @@ class Backend(ABC):
     def set_marker(self, name: str, position: FloatArray) -> None:
         """Move marker ``name`` to ``position``."""
 
-    @abstractmethod
-    def render(self, camera: Camera) -> npt.NDArray[np.uint8]:
-        """An RGB image, shape (height, width, 3), with no display needed."""
-
-    @abstractmethod
-    def close(self) -> None:
-        """Release the engine. Safe to call more than once."""
-
-    def bare_loop(self, deltas: FloatArray) -> None:
-        """The engine work of ``len(deltas)`` env steps, written directly against the engine.
-
-        For each row: target = clip(q + delta) into the joint limits, set the position
-        targets, run ``physics.substeps`` physics steps, read joint positions, velocities and
-        the end effector. This is the floor an env step is measured against (``armreach
-        bench``); backends that cannot provide it raise NotImplementedError.
-        """
-        raise NotImplementedError(f"backend {self.name!r} has no bare loop for benchmarks")
-
-    @classmethod
-    def live_clients(cls) -> int | None:
-        """Engine connections open in this process (for leak checks), or ``None`` if the engine has none."""
-        return None
-
-    def diverged(self) -> bool:
-        """Whether the last :meth:`step` went numerically unstable and the engine repaired it.
-
-        Engines that let NaN through need not override this (the env checks the state);
-        MuJoCo resets its state on a diverging step, so its backend reports that here.
-        """
-        return False
-
-    def read_state(self) -> ArmState:
-        """Joint state, end-effector position and free bodies in one call (backends may batch the reads)."""
-        q, qd = self.joint_state()
-        objects = {name: self.body_state(name) for name in self.free_bodies()}
-        return ArmState(q=q, qd=qd, ee_pos=self.link_position(self.robot.ee_link), objects=objects)
-
-    # -- bodies: optional, for tasks with objects ------------------------------------------
     def _unsupported(self, what: str) -> NotImplementedError:
         return NotImplementedError(f"backend {self.name!r} does not support {what}")
 
@@ -246,3 +188,61 @@ class Backend(ABC):
         for the same result on every engine. Call before the first reset.
         """
         raise self._unsupported("friction")
+
+
+class Backend(Scene):
+    """One physics engine, one robot, one world. Subclasses register through a plugin.
+
+    Diagnostics that are not part of running an env (the bare engine loop of ``armreach
+    bench``, the engine-connection count of ``armreach soak``) are not methods here: a
+    backend's plugin offers them as :class:`~armreach_core.specs.BackendProbes`.
+    """
+
+    def __init__(self, robot: RobotModel, physics: PhysicsConfig) -> None:
+        self.robot = robot
+        self.physics = physics
+
+    @abstractmethod
+    def reset_joints(self, q: npt.ArrayLike) -> None:
+        """Teleport the arm to ``q`` with zero velocity and hold it there (position targets = ``q``)."""
+
+    @abstractmethod
+    def set_joint_targets(self, q: FloatArray) -> None:
+        """Set position-control targets (rad or m), one per actuated joint."""
+
+    @abstractmethod
+    def step(self) -> None:
+        """Advance one control step: ``physics.substeps`` physics steps."""
+
+    @abstractmethod
+    def joint_state(self) -> tuple[FloatArray, FloatArray]:
+        """Joint positions and velocities of the actuated joints."""
+
+    @abstractmethod
+    def link_position(self, link: str) -> FloatArray:
+        """World position of a link's URDF frame."""
+
+    @abstractmethod
+    def render(self, camera: Camera) -> npt.NDArray[np.uint8]:
+        """An RGB image, shape (height, width, 3), with no display needed."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the engine. Safe to call more than once."""
+
+    def diverged(self) -> bool:
+        """Whether the last :meth:`step` went numerically unstable and the engine repaired it.
+
+        Engines that let NaN through need not override this (the env checks the state);
+        MuJoCo resets its state on a diverging step, so its backend reports that here.
+        """
+        return False
+
+    def read_state(self) -> ArmState:
+        """Joint state, end-effector position and free bodies in one call (backends may batch the reads).
+
+        All values must come from the same physics step (one consistent snapshot).
+        """
+        q, qd = self.joint_state()
+        objects = {name: self.body_state(name) for name in self.free_bodies()}
+        return ArmState(q=q, qd=qd, ee_pos=self.link_position(self.robot.ee_link), objects=objects)

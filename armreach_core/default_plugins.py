@@ -7,6 +7,7 @@ loaded exactly like a third-party plugin.
 from __future__ import annotations
 
 from armreach_core.bundled import asset_path
+from armreach_core.defaults import DEFAULT_ROBOT, DEFAULT_TASK
 from armreach_core.hookspecs import hookimpl
 from armreach_core.specs import Register, RobotSpec, TaskSpec
 
@@ -23,10 +24,11 @@ def _reach_task() -> type:
 def armreach_register_tasks(register: Register) -> None:
     register(
         TaskSpec(
-            name="reach",
+            name=DEFAULT_TASK,
             env_id="armreach/Reach-v0",
             load=_reach_task,
-            robot="ar6",
+            robot=DEFAULT_ROBOT,
+            max_episode_steps=2048,
             entry_point="armreach_core.reach_env:ArmReach6DOFEnv",
             description="reach a random 3D target within 5 cm (the paper's ArmReach6DOFEnv)",
         )
@@ -37,11 +39,11 @@ def armreach_register_tasks(register: Register) -> None:
 def armreach_register_robots(register: Register) -> None:
     register(
         RobotSpec(
-            name="ar6",
+            name=DEFAULT_ROBOT,
             urdf=asset_path("ar6", "ar6.urdf"),
             ee_link="tool0",
             home=AR6_HOME,
-            target_center=(0.45, 0.0, 0.45),
+            task_defaults={DEFAULT_TASK: {"target_center": (0.45, 0.0, 0.45)}},
             description="UR5-class 6-DOF arm with primitive geometry (bundled)",
         )
     )

@@ -7,11 +7,8 @@ engine lives behind :class:`~armreach_core.backend.Backend` and the scoring behi
 
 from __future__ import annotations
 
-import functools
-import inspect
 import math
 import os
-from pathlib import Path
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -19,12 +16,12 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.backend import ArmState, Backend, Camera, PhysicsConfig
-from armreach_core.errors import ActionError, ArmReachError, BackendUnavailableError, ConfigError
-from armreach_core.plugins import get_host
-from armreach_core.robot import RobotModel
-from armreach_core.specs import BackendSpec
+from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_ROBOT, DEFAULT_TASK
+from armreach_core.errors import ActionError, ArmReachError, ConfigError
+from armreach_core.loading import load_backend_class, load_robot, robot_spec, task_spec
 from armreach_core.task import Task
-from armreach_core.urdf import allow_external_meshes_default
+
+__all__ = ["JOINT_LIMIT_MODES", "STATE_LIMIT", "ArmEnv", "load_backend_class", "load_robot"]
 
 JOINT_LIMIT_MODES = ("clip", "terminate")
 #: Largest joint angle (rad or m), joint velocity (rad/s or m/s) or end-effector coordinate
@@ -32,60 +29,6 @@ JOINT_LIMIT_MODES = ("clip", "terminate")
 STATE_LIMIT = 1e6
 #: Action dtypes accepted: numbers that are real (bool, complex, text and objects are refused).
 _ACTION_KINDS = "iuf"
-
-
-@functools.lru_cache(maxsize=64)
-def _robot(
-    path: str,
-    mtime: float,
-    ee_link: str | None,
-    home: tuple[float, ...] | None,
-    tool_joints: tuple[str, ...],
-    external: bool,
-) -> RobotModel:
-    return RobotModel(path, ee_link=ee_link, home=home, tool_joints=tool_joints, allow_external_meshes=external)
-
-
-def load_robot(
-    urdf: str | os.PathLike[str],
-    ee_link: str | None = None,
-    home: npt.ArrayLike | None = None,
-    tool_joints: tuple[str, ...] = (),
-    *,
-    allow_external_meshes: bool | None = None,
-) -> RobotModel:
-    """A :class:`RobotModel`, cached per (file, modification time, ee_link, home, tool_joints, mesh rule)."""
-    path = Path(urdf).expanduser()
-    try:
-        mtime = path.stat().st_mtime if path.is_file() else -1.0
-    except (OSError, ValueError):  # a name too long to look up: RobotModel says it is not found
-        mtime = -1.0
-    home_key = None if home is None else tuple(float(v) for v in np.asarray(home, dtype=np.float64).ravel())
-    tools = tuple(str(name) for name in tool_joints)
-    external = allow_external_meshes_default() if allow_external_meshes is None else bool(allow_external_meshes)
-    if mtime < 0:  # raises the URDFError
-        return RobotModel(path, ee_link=ee_link, home=home, tool_joints=tools, allow_external_meshes=external)
-    return _robot(str(path.resolve()), mtime, ee_link, home_key, tools, external)
-
-
-def load_backend_class(name: str) -> type[Backend]:
-    """The Backend class registered as ``name``, importing its engine."""
-    backends = get_host().registry.backends
-    spec: BackendSpec | None = backends.get(name)
-    if spec is None:
-        known = ", ".join(sorted(backends)) or "none"
-        raise BackendUnavailableError(
-            f"backend {name!r} is not installed (installed backends: {known}); backends are separate "
-            f"distributions: install it with `pip install armreach-{name}` (from a checkout: "
-            f"`pip install -e backends/{name}`)"
-        )
-    try:
-        return spec.load()
-    except ImportError as exc:
-        raise BackendUnavailableError(
-            f"backend {name!r} cannot start because {exc.name or 'a dependency'} is missing ({exc}); "
-            f"install it with `{spec.install}`"
-        ) from exc
 
 
 class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
@@ -96,7 +39,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
 
     Args:
         task: registered task name.
-        backend: registered backend name (``"pybullet"``, ``"mujoco"``, ...).
+        backend: registered backend name (default :data:`~armreach_core.defaults.DEFAULT_BACKEND`).
         urdf: path to a URDF; default the task's bundled robot.
         ee_link: end-effector link; default the robot's.
         render_mode: ``None`` or ``"rgb_array"``.
@@ -104,7 +47,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         home: initial joint configuration (rad); default the robot's home.
         max_joint_step: joint change (rad) for an action of 1, default 0.05.
         timestep, substeps: physics step (s) and steps per action; default 1/240 and 10.
-        max_episode_steps: truncation (steps), default 2048.
+        max_episode_steps: truncation (steps) of an env constructed directly; default the
+            task's registered limit (``TaskSpec.max_episode_steps``). Under ``gym.make``
+            Gymnasium's ``TimeLimit`` truncates instead (``gym.make(id, max_episode_steps=N)``).
         joint_limit_mode: ``"clip"`` (default) clips targets into the limits;
             ``"terminate"`` ends the episode when a target leaves them (the paper's rule).
         self_collision, inertia_from_file: see :class:`~armreach_core.backend.PhysicsConfig`.
@@ -120,8 +65,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
 
     def __init__(
         self,
-        task: str = "reach",
-        backend: str = "pybullet",
+        task: str = DEFAULT_TASK,
+        backend: str = DEFAULT_BACKEND,
         urdf: str | os.PathLike[str] | None = None,
         ee_link: str | None = None,
         render_mode: str | None = None,
@@ -131,7 +76,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         max_joint_step: float = 0.05,
         timestep: float = 1.0 / 240.0,
         substeps: int = 10,
-        max_episode_steps: int = 2048,
+        max_episode_steps: int | None = None,
         joint_limit_mode: str = "clip",
         self_collision: bool = False,
         inertia_from_file: bool = True,
@@ -140,38 +85,32 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         allow_external_meshes: bool | None = None,
         **task_options: Any,
     ) -> None:
-        registry = get_host().registry
-        if task not in registry.tasks:
-            raise ConfigError(f"unknown task {task!r}; registered tasks: {', '.join(sorted(registry.tasks)) or 'none'}")
-        task_spec = registry.tasks[task]
+        spec = task_spec(task)
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ConfigError(f"render_mode={render_mode!r} is not supported; use None or 'rgb_array'")
         if joint_limit_mode not in JOINT_LIMIT_MODES:
             raise ConfigError(f"joint_limit_mode={joint_limit_mode!r}; use one of {JOINT_LIMIT_MODES}")
         if not (np.isfinite(max_joint_step) and 0 < max_joint_step <= 1.0):
             raise ConfigError(f"max_joint_step={max_joint_step!r} rad must be in (0, 1]")
+        if max_episode_steps is None:
+            max_episode_steps = spec.max_episode_steps
         if not (isinstance(max_episode_steps, int) and max_episode_steps >= 1):
             raise ConfigError(f"max_episode_steps={max_episode_steps!r} must be a positive integer")
 
-        robot_name = robot or (None if urdf is not None else task_spec.robot)
-        robot_options: dict[str, Any] = {}
+        robot_name = robot or (None if urdf is not None else spec.robot or DEFAULT_ROBOT)
         if robot_name is not None:
             if urdf is not None:
                 raise ConfigError("pass either urdf= or robot=, not both")
-            if robot_name not in registry.robots:
-                raise ConfigError(
-                    f"unknown robot {robot_name!r}; registered robots: {', '.join(sorted(registry.robots))}"
-                )
-            robot_spec = registry.robots[robot_name]
+            rspec = robot_spec(robot_name)
             self.robot = load_robot(
-                robot_spec.urdf,
-                ee_link or robot_spec.ee_link,
-                home if home is not None else robot_spec.home,
-                tuple(tool_joints) if tool_joints is not None else robot_spec.tool_joints,
+                rspec.urdf,
+                ee_link or rspec.ee_link,
+                home if home is not None else rspec.home,
+                tuple(tool_joints) if tool_joints is not None else rspec.tool_joints,
                 allow_external_meshes=allow_external_meshes,
             )
-            if robot_spec.target_center is not None:
-                robot_options["target_center"] = robot_spec.target_center
+            for key, value in rspec.task_defaults.get(task, {}).items():
+                task_options.setdefault(key, value)  # the robot's defaults for this task; the user's win
         else:
             assert urdf is not None
             self.robot = load_robot(
@@ -190,14 +129,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self.camera = camera or Camera()
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.physics.control_dt)}
         try:
-            task_cls = task_spec.load()
-            # A robot's defaults for the reach task go only to tasks that take them.
-            params = inspect.signature(task_cls).parameters
-            takes_any = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
-            for key, value in robot_options.items():
-                if takes_any or key in params:
-                    task_options.setdefault(key, value)
-            self.task: Task = task_cls(self.robot, **task_options)
+            self.task: Task = spec.load()(self.robot, **task_options)
         except TypeError as exc:
             raise ConfigError(f"bad option for task {task!r}: {exc}") from exc
 
@@ -216,6 +148,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self.task.setup_scene(self._backend)
         self._state: ArmState | None = None
         self._elapsed = 0
+        # Truncation belongs to Gymnasium's TimeLimit under gym.make (which sets ``spec``);
+        # an env constructed directly truncates itself at the same step.
+        self._truncate_at: int | None = max_episode_steps
 
     # -- helpers -----------------------------------------------------------------------
     @property
@@ -269,8 +204,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         state, unstable = self._checked_state(backend, None)
         self._state = state
         self._elapsed = 0
-        evaluation = self.task.evaluate(state)
-        info = dict(evaluation.info)
+        self._truncate_at = self.max_episode_steps if self.spec is None else None
+        info = self.task.score(state).info
         if unstable:
             info["physics_unstable"] = True
         return self.task.observation(state), info
@@ -288,15 +223,15 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         state, unstable = self._checked_state(backend, self._state)
         self._state = state
         self._elapsed += 1
-        evaluation = self.task.evaluate(state)
+        score = self.task.score(state)
         limit_stop = violated and self.joint_limit_mode == "terminate"
-        terminated = evaluation.success or limit_stop or unstable
-        truncated = not terminated and self._elapsed >= self.max_episode_steps
-        info = dict(evaluation.info)
+        terminated = score.success or limit_stop or unstable
+        truncated = not terminated and self._truncate_at is not None and self._elapsed >= self._truncate_at
+        info = score.info
         info["joint_limit_violation"] = violated
         if unstable:
             info["physics_unstable"] = True
-        return self.task.observation(state), float(evaluation.reward), terminated, truncated, info
+        return self.task.observation(state), score.reward, terminated, truncated, info
 
     def _checked_state(self, backend: Backend, previous: ArmState | None) -> tuple[ArmState, bool]:
         """The backend's state, and whether the physics blew up (then a finite stand-in state).
@@ -329,10 +264,10 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         objects = {name: body.nan_to_num() for name, body in state.objects.items()}
         return ArmState(q=q, qd=qd, ee_pos=np.asarray(ee, dtype=np.float64), objects=objects), True
 
-    def _goal_reward(self, achieved_goal: Any, desired_goal: Any, info: Any) -> npt.NDArray[np.float64]:
+    def _goal_reward(self, achieved_goal: Any, desired_goal: Any, info: Any) -> Any:
         return self.task.compute_reward(achieved_goal, desired_goal, info)
 
-    def _goal_terminated(self, achieved_goal: Any, desired_goal: Any, info: Any) -> npt.NDArray[np.bool_]:
+    def _goal_terminated(self, achieved_goal: Any, desired_goal: Any, info: Any) -> Any:
         return self.task.compute_terminated(achieved_goal, desired_goal, info)
 
     def _goal_truncated(self, achieved_goal: Any, desired_goal: Any, info: Any) -> npt.NDArray[np.bool_]:

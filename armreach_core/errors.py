@@ -25,3 +25,10 @@ class ActionError(ArmReachError, ValueError):
 
 class ConfigError(ArmReachError, ValueError):
     """An env, task or preset option is unknown or out of range."""
+
+
+class MissingExtraError(ArmReachError, ImportError):
+    """An optional part of armreach (training, sweeps) needs packages that are not installed.
+
+    The message names the extra to install, e.g. ``pip install 'armreach[rl]'``.
+    """

@@ -18,7 +18,6 @@ Reward:
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -28,10 +27,18 @@ from gymnasium import spaces
 from armreach_core.backend import ArmState
 from armreach_core.errors import ConfigError, URDFError
 from armreach_core.robot import FloatArray, RobotModel
-from armreach_core.task import Component, Evaluation, Scene, Task
+from armreach_core.task import Component, GoalArray, ObservationLayout, Scene, Task, goal_distance
 from armreach_core.workspace import TargetSampler, reachability_map
 
 TARGET_MARKER = "target"
+# The observation's components (names used in the layout and its docstring table).
+JOINTS, EE, TARGET, VELOCITIES, DELTA = (
+    "joint angles",
+    "end-effector position",
+    "target position",
+    "joint velocities",
+    "end effector to target",
+)
 
 
 class ReachTask(Task):
@@ -96,22 +103,12 @@ class ReachTask(Task):
                     f"{self.sampler.center.tolist()} at least {min_target_height} m high; move target_center "
                     f"inside the arm's reach (about {self.sampler.map.reach:.2f} m) or enlarge target_radius"
                 )
-        # The flat observation [θ, p_e, p_t, θ̇, p_t − p_e], filled in place through views of its parts.
-        n = robot.dof
-        self._flat = np.zeros(2 * n + 9)
-        self._flat_parts = (
-            self._flat[:n],
-            self._flat[n : n + 3],
-            self._flat[n + 6 : 2 * n + 6],
-            self._flat[2 * n + 6 :],
-        )
+        self.layout = ObservationLayout(self._components(self.sampler.map.reach))
+        # The flat observation, filled in place through views of its parts, and clipped
+        # into its float64 bounds before the float32 cast.
+        self._flat = np.zeros(self.layout.size)
+        self._views = self.layout.views(self._flat)
         self.target = self.sampler.center.copy()
-        reach = self.sampler.map.reach
-        self._components = self._layout(reach)
-        self._low = np.concatenate([c.low for c in self._components]).astype(np.float32)
-        self._high = np.concatenate([c.high for c in self._components]).astype(np.float32)
-        # the bounds the float64 observation is clipped to before it becomes float32
-        self._low64, self._high64 = self._low.astype(np.float64), self._high.astype(np.float64)
 
     @property
     def target(self) -> FloatArray:
@@ -121,35 +118,29 @@ class ReachTask(Task):
     @target.setter
     def target(self, value: npt.ArrayLike) -> None:
         self._target: FloatArray = np.array(value, dtype=np.float64)
-        n = self.robot.dof
-        self._flat[n + 3 : n + 6] = self._target  # once per episode, not per step
-        # the float32 goal the agent observes, as Python floats for the per-step distance
-        goal = self._target.astype(np.float32).tolist()
-        self._goal: tuple[float, float, float] = (goal[0], goal[1], goal[2])
+        self._goal32 = self._target.astype(np.float32)  # the goal as the agent observes it
+        if TARGET in self._views:
+            self._views[TARGET][...] = self._target  # once per episode, not per step
 
     # -- spaces ------------------------------------------------------------------------
-    def _layout(self, reach: float) -> list[Component]:
+    def _components(self, reach: float) -> list[Component]:
         robot, n = self.robot, self.robot.dof
         box = np.full(3, reach + 0.1)
         ball_low = self.sampler.center - self.sampler.radius
         ball_high = self.sampler.center + self.sampler.radius
         span = np.full(3, 2 * reach + 2 * self.sampler.radius + 0.2)
         vel = 2.0 * robot.velocity_limits
-        joint = Component("joint angles", n, "rad", robot.lower, robot.upper, "θ, inside the joint limits")
-        ee = Component("end-effector position", 3, "m", -box, box, "p_e, base frame, from the engine")
-        target = Component("target position", 3, "m", ball_low, ball_high, "p_t, base frame")
-        qd = Component("joint velocities", n, "rad/s", -vel, vel, "θ̇, bounded by twice the URDF limits")
-        delta = Component("end effector to target", 3, "m", -span, span, "p_t − p_e")
+        joint = Component(JOINTS, n, "rad", robot.lower, robot.upper, "θ, inside the joint limits")
+        ee = Component(EE, 3, "m", -box, box, "p_e, base frame, from the engine")
+        target = Component(TARGET, 3, "m", ball_low, ball_high, "p_t, base frame")
+        qd = Component(VELOCITIES, n, "rad/s", -vel, vel, "θ̇, bounded by twice the URDF limits")
+        delta = Component(DELTA, 3, "m", -span, span, "p_t − p_e")
         if self.goal_conditioned:
             return [joint, qd]
         return [joint, ee, target, qd, delta]
 
-    def components(self) -> list[Component]:
-        """The blocks of the flat observation, in order (used for docs and bounds)."""
-        return list(self._components)
-
     def observation_space(self) -> spaces.Space[Any]:
-        flat = spaces.Box(self._low, self._high, dtype=np.float32)
+        flat = self.layout.box()
         if not self.goal_conditioned:
             return flat
         reach = np.full(3, self.sampler.map.reach + 0.1, dtype=np.float32)
@@ -172,41 +163,36 @@ class ReachTask(Task):
         scene.set_marker(TARGET_MARKER, self.target)
 
     def observation(self, state: ArmState) -> Any:
-        if self.goal_conditioned:
-            flat = np.concatenate([state.q, state.qd])
-            return {
-                "observation": np.minimum(np.maximum(flat, self._low), self._high).astype(np.float32),
-                "achieved_goal": state.ee_pos.astype(np.float32),
-                "desired_goal": self.target.astype(np.float32),
-            }
-        flat, (q, ee, qd, delta) = self._flat, self._flat_parts  # p_t is written once per episode
-        q[...] = state.q
-        ee[...] = state.ee_pos
-        qd[...] = state.qd
-        np.subtract(self._target, state.ee_pos, out=delta)
-        np.maximum(flat, self._low64, out=flat)
-        return np.minimum(flat, self._high64, out=flat).astype(np.float32)
+        flat, views, layout = self._flat, self._views, self.layout
+        views[JOINTS][...] = state.q
+        views[VELOCITIES][...] = state.qd
+        if not self.goal_conditioned:  # p_t is written once per episode
+            views[EE][...] = state.ee_pos
+            np.subtract(self._target, state.ee_pos, out=views[DELTA])
+        np.maximum(flat, layout.low, out=flat)
+        observation = np.minimum(flat, layout.high, out=flat).astype(np.float32)
+        if not self.goal_conditioned:
+            return observation
+        return {
+            "observation": observation,
+            "achieved_goal": state.ee_pos.astype(np.float32),
+            "desired_goal": self._goal32.copy(),
+        }
 
-    def evaluate(self, state: ArmState) -> Evaluation:
-        # Scored from the float32 goals the agent observes, so that the invariant
-        # reward == compute_reward(achieved_goal, desired_goal, info) holds exactly: the
-        # same float64 operations as _distance and _reward, in the same order, on Python
-        # floats (numpy's per-call cost on three numbers is most of an env step's overhead).
-        ex, ey, ez = state.ee_pos.astype(np.float32).tolist()
-        gx, gy, gz = self._goal
-        dx, dy, dz = ex - gx, ey - gy, ez - gz
-        distance = math.sqrt(dx * dx + dy * dy + dz * dz)  # left to right, as numpy adds three values
-        success = distance < self.success_threshold
-        bonus = self.success_bonus if success else 0.0
-        reward = -float(self._power(distance)) + bonus
-        info = {"distance": distance, "is_success": success, "reward_distance": reward - bonus, "reward_success": bonus}
-        return Evaluation(reward, success, info)
+    # -- scoring: one path, pure and batch-friendly ---------------------------------------
+    def achieved_goal(self, state: ArmState) -> GoalArray:
+        return state.ee_pos.astype(np.float32)
 
-    # -- pure, batch-friendly ----------------------------------------------------------
-    def _distance(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        diff = np.asarray(achieved_goal, dtype=np.float64) - np.asarray(desired_goal, dtype=np.float64)
-        # What np.linalg.norm(diff, axis=-1) computes, without its dispatch overhead.
-        return np.asarray(np.sqrt(np.add.reduce(diff * diff, axis=-1)))
+    def desired_goal(self) -> GoalArray:
+        return self._goal32
+
+    def step_info(self, state: ArmState, achieved_goal: GoalArray, desired_goal: GoalArray) -> dict[str, Any]:
+        distance = goal_distance(achieved_goal, desired_goal)
+        return {
+            "distance": distance,
+            "reward_distance": self._distance_term(distance),
+            "reward_success": self._success_term(distance),
+        }
 
     def _power(self, distance: Any) -> Any:
         """``distance ** p`` for a float or an array, rounded identically for both.
@@ -224,15 +210,18 @@ class ReachTask(Task):
             return distance * distance * distance
         return np.power(distance, p)
 
-    def _reward(self, distance: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        return np.asarray(-self._power(distance) + self.success_bonus * (distance < self.success_threshold))
+    def _reached(self, distance: Any) -> Any:
+        return distance < self.success_threshold
 
-    def compute_reward(
-        self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any
-    ) -> npt.NDArray[np.float64]:
-        return self._reward(self._distance(achieved_goal, desired_goal))
+    def _distance_term(self, distance: Any) -> Any:
+        return -self._power(distance)
 
-    def compute_terminated(
-        self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any
-    ) -> npt.NDArray[np.bool_]:
-        return np.asarray(self._distance(achieved_goal, desired_goal) < self.success_threshold)
+    def _success_term(self, distance: Any) -> Any:
+        return self.success_bonus * self._reached(distance)
+
+    def compute_reward(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any) -> Any:
+        distance = goal_distance(achieved_goal, desired_goal)
+        return self._distance_term(distance) + self._success_term(distance)
+
+    def compute_terminated(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any) -> Any:
+        return self._reached(goal_distance(achieved_goal, desired_goal))

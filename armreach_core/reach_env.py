@@ -5,9 +5,9 @@ from __future__ import annotations
 import os
 from typing import Any
 
-import numpy as np
-
+from armreach_core.defaults import DEFAULT_BACKEND
 from armreach_core.env import ArmEnv
+from armreach_core.reach import ReachTask
 
 _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
 
@@ -28,7 +28,7 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     ## Observation space
 
     ``Box(low, high, (2n + 9,), float32)``; values are clipped into the bounds below.
-    For the bundled arm (ar6), as :func:`observation_table` builds it from the task
+    For the bundled arm (ar6), as the task's ``layout.table()`` builds it
     (a test keeps this table equal to the code):
 
     | index | component | unit | low | high | notes |
@@ -64,7 +64,10 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
       ``info["physics_unstable"]``, with finite observation and reward); with ``joint_limit_mode="terminate"``, a
       target outside the joint limits (the paper's rule; the default ``"clip"`` clips
       targets into the limits instead, which lets a policy learn near the limits).
-    * Truncation: ``max_episode_steps`` steps (default 2048, the paper's cap).
+    * Truncation: after ``max_episode_steps`` steps (2048, the paper's cap): Gymnasium's
+      ``TimeLimit`` under ``gym.make`` (``spec.max_episode_steps`` is 2048, and
+      ``gym.make(id, max_episode_steps=N)`` sets another), the env itself when this class
+      is constructed directly (``max_episode_steps=N``).
 
     ## Physics
 
@@ -89,25 +92,11 @@ class ArmReach6DOFEnv(ArmEnv):
 
     def __init__(
         self,
-        backend: str = "pybullet",
+        backend: str = DEFAULT_BACKEND,
         urdf: str | os.PathLike[str] | None = None,
         ee_link: str | None = None,
         render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
         kwargs.pop("task", None)
-        super().__init__("reach", backend, urdf, ee_link, render_mode, **kwargs)
-
-
-def observation_table(components: list[Any]) -> str:
-    """A markdown table of observation components (index, name, unit, bounds)."""
-    rows = ["    | index | component | unit | low | high | notes |", "    |---|---|---|---|---|---|"]
-    start = 0
-    for comp in components:
-        stop = start + comp.size
-        index = f"{start}" if comp.size == 1 else f"{start}–{stop - 1}"
-        low = np.array2string(np.asarray(comp.low), precision=2, separator=", ")
-        high = np.array2string(np.asarray(comp.high), precision=2, separator=", ")
-        rows.append(f"    | {index} | {comp.name} | {comp.unit} | {low} | {high} | {comp.description} |")
-        start = stop
-    return "\n".join(rows)
+        super().__init__(ReachTask.name, backend, urdf, ee_link, render_mode, **kwargs)

@@ -18,5 +18,10 @@ def sync_gym_registry(registry: Registry) -> None:
             _REGISTERED.discard(env_id)
     for env_id, spec in wanted.items():
         gym.registry.pop(env_id, None)
-        gym.register(id=env_id, entry_point=spec.entry_point, kwargs={**spec.defaults, "task": spec.name})
+        gym.register(
+            id=env_id,
+            entry_point=spec.entry_point,
+            max_episode_steps=spec.max_episode_steps,
+            kwargs={**spec.defaults, "task": spec.name},
+        )
         _REGISTERED.add(env_id)

@@ -12,9 +12,28 @@ from armreach_core.errors import PluginError
 
 if TYPE_CHECKING:
     from armreach_core.backend import Backend
+    from armreach_core.robot import FloatArray
     from armreach_core.task import Task
 
 _NAME = re.compile(r"^[a-z][a-z0-9_\-]*$")
+
+
+@dataclass(frozen=True)
+class BackendProbes:
+    """Diagnostics of one engine that running an env does not need (``armreach bench``, ``soak``).
+
+    Attributes:
+        bare_loop: ``bare_loop(backend, deltas)`` does the engine work of ``len(deltas)``
+            env steps written directly against the engine: for each row, target =
+            ``q + delta`` clipped into the joint limits, set the position targets, run
+            ``physics.substeps`` physics steps, read joint positions, velocities and the end
+            effector. The floor an env step is measured against; ``None``: not offered.
+        live_clients: engine connections open in this process (leak checks); ``None`` for
+            engines without connections.
+    """
+
+    bare_loop: Callable[[Backend, FloatArray], None] | None = None
+    live_clients: Callable[[], int] | None = None
 
 
 @dataclass(frozen=True)
@@ -27,12 +46,14 @@ class BackendSpec:
             engine, so an ``ImportError`` here means the engine is not installed.
         install: the command that installs what ``load`` needs (shown in errors).
         description: one line for ``armreach plugins``.
+        probes: returns the backend's :class:`BackendProbes` (imports the engine), or ``None``.
     """
 
     name: str
     load: Callable[[], type[Backend]]
     install: str
     description: str = ""
+    probes: Callable[[], BackendProbes] | None = None
 
 
 @dataclass(frozen=True)
@@ -43,7 +64,11 @@ class TaskSpec:
         name: the task's name (``reach``).
         env_id: the Gymnasium id (``armreach/Reach-v0``); the namespace must be ``armreach``.
         load: returns the :class:`~armreach_core.task.Task` subclass.
-        robot: the registered robot the task uses when no ``urdf`` is given.
+        robot: the registered robot the task uses when no ``urdf`` is given (``None``:
+            :data:`~armreach_core.defaults.DEFAULT_ROBOT`).
+        max_episode_steps: the episode length Gymnasium's ``TimeLimit`` enforces for
+            ``env_id`` (``spec.max_episode_steps``); an env constructed directly truncates
+            at the same step.
         defaults: default keyword arguments of the env for this id.
         entry_point: the env class, as ``"module:Class"``; it receives ``task=name``
             unless it fixes the task itself.
@@ -53,7 +78,8 @@ class TaskSpec:
     name: str
     env_id: str
     load: Callable[[], type[Task]]
-    robot: str = "ar6"
+    robot: str | None = None
+    max_episode_steps: int = 2048
     defaults: Mapping[str, Any] = field(default_factory=dict)
     entry_point: str = "armreach_core.env:ArmEnv"
     description: str = ""
@@ -68,7 +94,8 @@ class RobotSpec:
         urdf: path of the URDF file.
         ee_link: the end-effector link (``None``: the tip of the chain).
         home: initial joint configuration in the URDF's joint order (rad).
-        target_center: centre of the reach task's target sphere (m, base frame).
+        task_defaults: this robot's defaults for task options, keyed by task name, e.g.
+            ``{"reach": {"target_center": (0.45, 0.0, 0.45)}}``; an option the user passes wins.
         description: one line for ``armreach plugins``.
         tool_joints: movable joints off the arm's chain that are actuated too (a
             gripper's fingers), appended to the joint vector in this order; ``home``
@@ -79,7 +106,7 @@ class RobotSpec:
     urdf: Path
     ee_link: str | None = None
     home: tuple[float, ...] | None = None
-    target_center: tuple[float, float, float] | None = None
+    task_defaults: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     description: str = ""
     tool_joints: tuple[str, ...] = ()
 

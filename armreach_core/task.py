@@ -1,56 +1,55 @@
 """The interface of a task: what the arm must do, scored by pure, batch-friendly functions.
 
-A task never talks to an engine. It sees the world through a :class:`Scene` (markers
-it may place) and :class:`~armreach_core.backend.ArmState` snapshots, gets its random
-generator from the env, and computes reward and success from arrays, so that the
-Gymnasium-Robotics invariant ``reward == compute_reward(achieved, desired, info)`` holds
-for single transitions and for batches (SB3's HER relabels batches).
+A task never talks to an engine. It sees the world through a
+:class:`~armreach_core.backend.Scene` (markers and bodies it may place) and
+:class:`~armreach_core.backend.ArmState` snapshots, gets its random generator from the
+env, and scores a state only through :meth:`Task.compute_reward` and
+:meth:`Task.compute_terminated`, pure functions of goals that also work on batches (SB3's
+HER relabels batches). :meth:`Task.score` is the one path the env takes, so
+``reward == compute_reward(achieved_goal, desired_goal, info)`` holds by construction.
 """
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar, Protocol
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
 from gymnasium import spaces
 
-from armreach_core.backend import ArmState, BodyState
+from armreach_core.backend import ArmState, Scene
 from armreach_core.robot import FloatArray, RobotModel
 
+__all__ = ["Component", "GoalArray", "ObservationLayout", "Scene", "Score", "Task", "goal_distance"]
 
-class Scene(Protocol):
-    """The part of a backend a task may use (see :class:`~armreach_core.backend.Backend`)."""
+#: A goal as the agent observes it (float32 for the built-in tasks).
+GoalArray = npt.NDArray[Any]
 
-    def add_marker(self, name: str, radius: float, rgba: tuple[float, float, float, float]) -> None: ...
 
-    def set_marker(self, name: str, position: FloatArray) -> None: ...
+def goal_distance(achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike) -> Any:
+    """Euclidean distance between goals: a float for one pair, an array for batches (last axis).
 
-    def add_box(
-        self,
-        name: str,
-        half_extents: tuple[float, float, float],
-        mass: float,
-        *,
-        friction: float = 1.0,
-        rgba: tuple[float, float, float, float] = (0.8, 0.3, 0.2, 1.0),
-        position: tuple[float, float, float] = (0.0, 0.0, 0.0),
-    ) -> None: ...
-
-    def set_body_pose(self, name: str, position: npt.ArrayLike, orientation: npt.ArrayLike = (1, 0, 0, 0)) -> None: ...
-
-    def body_state(self, name: str) -> BodyState: ...
-
-    def contact_force(self, a: str, b: str) -> float: ...
-
-    def set_friction(self, name: str, friction: float) -> None: ...
+    One pair of 3-vectors is computed on Python floats (numpy's per-call cost on three
+    numbers is most of an env step's overhead), with the same float64 operations in the
+    same order as the array path, so both give bit-identical results.
+    """
+    pair = type(achieved_goal) is np.ndarray and type(desired_goal) is np.ndarray
+    if pair and achieved_goal.shape == (3,) and desired_goal.shape == (3,):  # type: ignore[union-attr]
+        ax, ay, az = achieved_goal.tolist()  # type: ignore[union-attr]
+        gx, gy, gz = desired_goal.tolist()  # type: ignore[union-attr]
+        dx, dy, dz = ax - gx, ay - gy, az - gz
+        return math.sqrt(dx * dx + dy * dy + dz * dz)  # left to right, as numpy adds three values
+    diff = np.asarray(achieved_goal, dtype=np.float64) - np.asarray(desired_goal, dtype=np.float64)
+    return np.sqrt(np.add.reduce(diff * diff, axis=-1))
 
 
 @dataclass(frozen=True)
 class Component:
-    """One block of a flat observation, for building bounds and documentation tables."""
+    """One block of a flat observation: its name, size, unit, bounds and a note for the docs."""
 
     name: str
     size: int
@@ -60,9 +59,59 @@ class Component:
     description: str
 
 
+class ObservationLayout:
+    """The one declaration of a flat observation: slices, bounds and the documentation table.
+
+    Built from :class:`Component` blocks in order; everything else about the layout (where
+    each block sits, the ``Box`` bounds, the docstring table, unpacking an observation)
+    is derived from it.
+    """
+
+    def __init__(self, components: Sequence[Component]) -> None:
+        self.components: tuple[Component, ...] = tuple(components)
+        slices: dict[str, slice] = {}
+        start = 0
+        for comp in self.components:
+            if comp.name in slices:
+                raise ValueError(f"observation component {comp.name!r} is declared twice")
+            slices[comp.name] = slice(start, start + comp.size)
+            start += comp.size
+        self.slices = slices
+        self.size = start
+        # float64 copies of the float32 bounds of the Box, to clip a float64 observation into it
+        low = np.concatenate([np.broadcast_to(c.low, (c.size,)) for c in self.components]).astype(np.float32)
+        high = np.concatenate([np.broadcast_to(c.high, (c.size,)) for c in self.components]).astype(np.float32)
+        self.low: FloatArray = low.astype(np.float64)
+        self.high: FloatArray = high.astype(np.float64)
+
+    def box(self) -> spaces.Box:
+        """The observation space of the flat observation (float32)."""
+        return spaces.Box(self.low.astype(np.float32), self.high.astype(np.float32), dtype=np.float32)
+
+    def views(self, flat: FloatArray) -> dict[str, FloatArray]:
+        """Writable views of ``flat``, one per component, to fill an observation in place."""
+        return {name: flat[part] for name, part in self.slices.items()}
+
+    def unpack(self, flat: npt.ArrayLike) -> dict[str, FloatArray]:
+        """An observation's blocks by component name (float64 copies)."""
+        values = np.asarray(flat, dtype=np.float64)
+        return {name: values[part].copy() for name, part in self.slices.items()}
+
+    def table(self, indent: str = "    ") -> str:
+        """The markdown table of the docstrings: index, component, unit, bounds, notes."""
+        rows = [f"{indent}| index | component | unit | low | high | notes |", f"{indent}|---|---|---|---|---|---|"]
+        for comp in self.components:
+            part = self.slices[comp.name]
+            index = f"{part.start}" if comp.size == 1 else f"{part.start}–{part.stop - 1}"
+            low = np.array2string(np.asarray(comp.low), precision=2, separator=", ")
+            high = np.array2string(np.asarray(comp.high), precision=2, separator=", ")
+            rows.append(f"{indent}| {index} | {comp.name} | {comp.unit} | {low} | {high} | {comp.description} |")
+        return "\n".join(rows)
+
+
 @dataclass(frozen=True)
-class Evaluation:
-    """A task's verdict on one state."""
+class Score:
+    """A task's score of one state: reward, success and the ``info`` terms."""
 
     reward: float
     success: bool
@@ -78,7 +127,11 @@ class Task(ABC):
     * ``initialize_episode(scene, rng)`` at every reset, before the first observation;
     * ``joint_targets(action, q, max_joint_step)`` at every step, to turn the action
       into position targets (by default one relative step per joint);
-    * ``observation(state)`` and ``evaluate(state)`` after every reset and step.
+    * ``observation(state)`` and ``score(state)`` after every reset and step.
+
+    A subclass defines its goals (:meth:`achieved_goal`, :meth:`desired_goal`), what
+    ``info`` holds (:meth:`step_info`) and the pure functions :meth:`compute_reward` and
+    :meth:`compute_terminated`; :meth:`score` combines them and is not overridden.
     """
 
     #: Short name, as registered.
@@ -114,18 +167,31 @@ class Task(ABC):
     def observation(self, state: ArmState) -> Any:
         """The observation for ``state``, inside :meth:`observation_space`."""
 
+    # -- scoring -----------------------------------------------------------------------
     @abstractmethod
-    def evaluate(self, state: ArmState) -> Evaluation:
-        """Reward, success and info terms for ``state``."""
+    def achieved_goal(self, state: ArmState) -> GoalArray:
+        """What the agent has achieved in ``state``, as it observes it (e.g. the float32 end effector)."""
 
     @abstractmethod
-    def compute_reward(
-        self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any
-    ) -> npt.NDArray[np.float64]:
-        """Reward for goals of shape (3,) or (batch, 3) (pure function)."""
+    def desired_goal(self) -> GoalArray:
+        """The episode's goal, as the agent observes it."""
+
+    def step_info(self, state: ArmState, achieved_goal: GoalArray, desired_goal: GoalArray) -> dict[str, Any]:
+        """The ``info`` terms of a state (diagnostics, and whatever :meth:`compute_reward` reads); default none."""
+        return {}
+
+    def score(self, state: ArmState) -> Score:
+        """Reward, success and info of ``state``, through :meth:`compute_reward` and :meth:`compute_terminated`."""
+        achieved, desired = self.achieved_goal(state), self.desired_goal()
+        info = self.step_info(state, achieved, desired)
+        success = bool(self.compute_terminated(achieved, desired, info))
+        info["is_success"] = success
+        return Score(float(self.compute_reward(achieved, desired, info)), success, info)
 
     @abstractmethod
-    def compute_terminated(
-        self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any
-    ) -> npt.NDArray[np.bool_]:
-        """Whether an episode ends (success) for goals of shape (3,) or (batch, 3)."""
+    def compute_reward(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any) -> Any:
+        """Reward for goals of shape (k,) (a float) or (batch, k) (an array); a pure function."""
+
+    @abstractmethod
+    def compute_terminated(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any) -> Any:
+        """Whether the goal is reached (success, which ends the episode), for one goal or a batch."""

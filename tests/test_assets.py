@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -46,17 +47,22 @@ def test_one_second_of_random_control_stays_finite(name, backend):
 
 
 def test_wheel_ships_the_assets(tmp_path):
-    command = [sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps", "--no-build-isolation", "-q"]
-    subprocess.run(
-        [*command, "-w", str(tmp_path)],
-        check=True,
-        capture_output=True,
-    )
+    """Built from a copy of the sources, so that the checkout gets no build/ or egg-info folders."""
+    source = tmp_path / "src"
+    source.mkdir()
+    skip = shutil.ignore_patterns("*.egg-info", "build", "__pycache__")
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy2(ROOT / name, source / name)
+    for name in ("armreach_core", "assets"):
+        shutil.copytree(ROOT / name, source / name, ignore=skip)
+    command = [sys.executable, "-m", "pip", "wheel", str(source), "--no-deps", "--no-build-isolation", "-q"]
+    subprocess.run([*command, "-w", str(tmp_path)], check=True, capture_output=True)
     (wheel,) = tmp_path.glob("armreach-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     assert "armreach_core/assets/ar6/ar6.urdf" in names
     assert "armreach_core/assets/ar6/README.md" in names
     assert "armreach_core/py.typed" in names
+    assert "armreach_core/tools/bench.py" in names
     entry_points = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("entry_points.txt"))).decode()
     assert "armreach = armreach_core.default_plugins" in entry_points
     assert not any(n.startswith(("backends/", "tasks/", "tests/")) for n in names)

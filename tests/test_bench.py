@@ -9,6 +9,7 @@ import pytest
 
 from armreach_core import ArmReach6DOFEnv
 from armreach_core.cli import main
+from armreach_core.loading import load_backend_probes
 from tests.conftest import BACKENDS
 
 
@@ -22,7 +23,9 @@ def test_bare_loop_does_the_physics_of_env_steps(backend: str) -> None:
             env.step(action)
         q_env, qd_env = env.backend.joint_state()
         env.reset(seed=5)
-        env.backend.bare_loop(actions * env.max_joint_step)
+        bare_loop = load_backend_probes(backend).bare_loop
+        assert bare_loop is not None
+        bare_loop(env.backend, actions * env.max_joint_step)
         q_bare, qd_bare = env.backend.joint_state()
     finally:
         env.close()

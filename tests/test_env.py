@@ -10,6 +10,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 import armreach_core
 from armreach_core import ActionError, ArmReach6DOFEnv, ConfigError
 from armreach_core.backend import ArmState
+from armreach_core.task import goal_distance
 from tests.conftest import BACKENDS, TASK_BACKENDS
 
 pytestmark = pytest.mark.skipif(not BACKENDS, reason="no physics backend installed")
@@ -79,13 +80,13 @@ def test_reward_cases_by_hand(env):
     env.reset(seed=0)
     task = env.unwrapped.task
     target = task.target.copy()
-    far = task.evaluate(ArmState(np.zeros(6), np.zeros(6), target + [0.1, 0.0, 0.0]))
+    far = task.score(ArmState(np.zeros(6), np.zeros(6), target + [0.1, 0.0, 0.0]))
     assert far.reward == pytest.approx(-(0.1**3))
     assert not far.success and far.info["reward_success"] == 0.0
-    near = task.evaluate(ArmState(np.zeros(6), np.zeros(6), target + [0.0, 0.04, 0.0]))
+    near = task.score(ArmState(np.zeros(6), np.zeros(6), target + [0.0, 0.04, 0.0]))
     assert near.reward == pytest.approx(10.0 - 0.04**3)
     assert near.success and near.info["reward_distance"] == pytest.approx(-(0.04**3))
-    edge = task.evaluate(ArmState(np.zeros(6), np.zeros(6), target + [0.0, 0.0, 0.0500001]))
+    edge = task.score(ArmState(np.zeros(6), np.zeros(6), target + [0.0, 0.0, 0.0500001]))
     assert not edge.success
     # batch: the pure function gives the same numbers
     achieved = np.stack([target + [0.1, 0, 0], target + [0, 0.04, 0]])
@@ -97,7 +98,7 @@ def test_reward_cases_by_hand(env):
 
 @pytest.mark.parametrize("exponent", [3.0, 1.0, 2.0, 2.5, 0.5])
 def test_step_reward_equals_batch_compute_reward_bit_for_bit(exponent):
-    """evaluate() scores one state with Python floats; compute_reward() batches with numpy: same bits."""
+    """score() takes one pair of goals on Python floats; compute_reward() batches with numpy: same bits."""
     env = ArmReach6DOFEnv(backend=BACKENDS[0], distance_exponent=exponent)
     task = env.unwrapped.task
     rng = np.random.default_rng(7)
@@ -105,7 +106,7 @@ def test_step_reward_equals_batch_compute_reward_bit_for_bit(exponent):
     for _ in range(2000):
         task.target = rng.uniform(-1, 1, 3)
         ee = task.target + rng.normal(size=3) * 10.0 ** rng.uniform(-4, 0.5)
-        evaluation = task.evaluate(ArmState(np.zeros(6), np.zeros(6), ee))
+        evaluation = task.score(ArmState(np.zeros(6), np.zeros(6), ee))
         achieved.append(ee.astype(np.float32))
         desired.append(task.target.astype(np.float32))
         rewards.append(evaluation.reward)
@@ -113,7 +114,7 @@ def test_step_reward_equals_batch_compute_reward_bit_for_bit(exponent):
     env.close()
     batch = task.compute_reward(np.array(achieved), np.array(desired), {})
     np.testing.assert_array_equal(batch, rewards)
-    np.testing.assert_array_equal(task._distance(np.array(achieved), np.array(desired)), distances)
+    np.testing.assert_array_equal(goal_distance(np.array(achieved), np.array(desired)), distances)
     np.testing.assert_array_equal(
         task.compute_terminated(np.array(achieved), np.array(desired), {}), np.array(distances) < 0.05
     )
@@ -245,10 +246,8 @@ def test_step_before_reset_and_after_close(backend):
 
 
 def test_docstring_table_matches_the_code():
-    from armreach_core.reach_env import observation_table
-
     env = ArmReach6DOFEnv(backend=BACKENDS[0])
-    table = observation_table(env.unwrapped.task.components())
+    table = env.unwrapped.task.layout.table()
     env.close()
     assert table in ArmReach6DOFEnv.__doc__
     assert "## Version history" in ArmReach6DOFEnv.__doc__

@@ -32,7 +32,7 @@ PAIR = ("pybullet", "mujoco")
 needs_both = pytest.mark.skipif(not set(PAIR) <= set(BACKENDS), reason="needs the PyBullet and MuJoCo backends")
 #: Object-pose parity of the scripted grasp, PyBullet against MuJoCo (m). Measured over seeds
 #: 0-19: RMS gap 0.6-6.5 mm (mean 1.8), largest gap 19 mm; MuJoCo's soft contacts let the
-#: lifted cube sink a few mm in the grip (see armreach_mujoco.backend, "Contacts").
+#: lifted cube sink a few mm in the grip (see docs/mujoco-backend.md, "Contacts").
 PARITY_RMS, PARITY_MAX = 0.010, 0.025
 
 
@@ -143,7 +143,7 @@ def test_reward_cases_by_hand(backend, reward_type):
         (np.array([0.0, 0.029, 0.0]), np.zeros(3)),  # held, inside the threshold
         (np.array([0.0, 0.0, -0.0301]), np.array([0.01, 0.0, 0.0])),  # just outside
     ]
-    evaluations = [task.evaluate(_state(goal + off + grip, goal + off)) for off, grip in cases]
+    evaluations = [task.score(_state(goal + off + grip, goal + off)) for off, grip in cases]
     assert [e.success for e in evaluations] == [False, True, False]
     for (off, grip), e in zip(cases, evaluations, strict=True):
         d, g = np.linalg.norm(off), np.linalg.norm(grip)
@@ -240,10 +240,8 @@ def test_object_pose_parity_during_a_scripted_grasp(seed):
 
 
 def test_docstring_table_matches_the_code():
-    from armreach_core.reach_env import observation_table
-
     env = ArmGraspEnv(backend=BACKENDS[0])
-    table = observation_table(env.task.components())
+    table = env.task.layout.table()
     env.close()
     assert table in ArmGraspEnv.__doc__
     assert "## Version history" in ArmGraspEnv.__doc__

@@ -1,4 +1,4 @@
-"""MuJoCo specifics: the same URDF as PyBullet, kinematic and dynamic parity, caching, close."""
+"""MuJoCo specifics: the same URDF as PyBullet, kinematic and dynamic parity, caching, rendering, close."""
 
 from __future__ import annotations
 
@@ -7,26 +7,29 @@ import re
 import subprocess
 import sys
 import time
-from collections import OrderedDict
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from armreach_core import ArmEnv, ArmReach6DOFEnv, URDFError, parity
-from armreach_core.backend import PhysicsConfig
+from armreach_core import ArmEnv, ArmReach6DOFEnv, URDFError
+from armreach_core.backend import Camera, PhysicsConfig
 from armreach_core.ik import IKPolicy
 from armreach_core.robot import RobotModel
+from armreach_core.tools import parity
 
 mujoco = pytest.importorskip("mujoco")
 mjb = pytest.importorskip("armreach_mujoco.backend")
+compiled = pytest.importorskip("armreach_mujoco.compiled")
+world = pytest.importorskip("armreach_mujoco.world")
 
 pytestmark = pytest.mark.mujoco
 
 AR6_HOME = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
 #: Honest bounds on the PyBullet-MuJoCo gap over 200 control steps from home, seed 0, with
 #: the sequences of ``armreach parity`` (measured values in the comments; see
-#: armreach_mujoco.backend for how the gains were matched). The random sequence is open
+#: docs/mujoco-backend.md for how the gains were matched). The random sequence is open
 #: loop (targets relative to each engine's own angles), so per-step differences add up.
 DYNAMIC_BOUNDS = {
     # (arm, sequence): (joint RMS rad, EE RMS m)
@@ -55,7 +58,7 @@ def test_every_urdf_link_is_a_body_and_markers_are_visual_only(arms):
     backend.add_marker("target", 0.05, (0.9, 0.1, 0.1, 0.8))
     model = backend.model
     for link in arms["ar6"].link_names:
-        assert link in backend._compiled.bodies
+        assert model.body(link).name == link  # KeyError if MuJoCo merged it away
     marker = model.body("armreach_marker_target")
     geom = model.body_geomadr[marker.id]
     assert model.geom_contype[geom] == 0 and model.geom_conaffinity[geom] == 0
@@ -136,7 +139,7 @@ def test_self_collision_switch(ar6_urdf):
     robot = RobotModel(ar6_urdf, ee_link="tool0", home=AR6_HOME)
     off = mjb.MuJoCoBackend(robot, PhysicsConfig(self_collision=False)).model
     on = mjb.MuJoCoBackend(robot, PhysicsConfig(self_collision=True)).model
-    arm = [g for g in range(off.ngeom) if off.geom_contype[g] == mjb.ARM_CONTYPE]
+    arm = [g for g in range(off.ngeom) if off.geom_contype[g] == world.ARM_CONTYPE]
     assert arm and all(not (off.geom_contype[g] & off.geom_conaffinity[g]) for g in arm)
     assert all(on.geom_contype[g] & on.geom_conaffinity[g] for g in arm)
     assert on.nexclude >= len(robot.joint_names)
@@ -158,6 +161,62 @@ def test_close_is_idempotent_and_isolated():
     env_a.close()
     backend.close()
     env_b.close()
+
+
+def test_read_state_is_one_snapshot():
+    """The end effector comes from the joint angles read with it (links brought up to qpos after the step)."""
+    env = ArmReach6DOFEnv(backend="mujoco")
+    robot, backend = env.unwrapped.robot, env.unwrapped.backend
+    obs, _ = env.reset(seed=0)
+    env.action_space.seed(0)
+    worst = 0.0
+    for _ in range(50):
+        obs, *_ = env.step(env.action_space.sample())
+        state = backend.read_state()
+        np.testing.assert_array_equal(obs[6:9], state.ee_pos.astype(np.float32))
+        worst = max(worst, float(np.abs(state.ee_pos - robot.forward_kinematics(state.q)).max()))
+    env.close()
+    assert worst < 1e-9, f"the end effector differs from the URDF kinematics of q by {worst:.2e} m"
+
+
+def _model_bytes(model) -> bytes:
+    buffer = np.zeros(mujoco.mj_sizeModel(model), dtype=np.uint8)
+    mujoco.mj_saveModel(model, None, buffer)
+    return buffer.tobytes()
+
+
+def test_rendering_never_writes_the_shared_model():
+    """Env B renders with another camera (field of view, a framebuffer larger than the model's): A is unchanged."""
+    env_a = ArmReach6DOFEnv(backend="mujoco", render_mode="rgb_array")
+    wide = Camera(fov=25.0, width=800, height=600)
+    env_b = ArmReach6DOFEnv(backend="mujoco", render_mode="rgb_array", camera=wide)
+    model = env_a.unwrapped.backend.model
+    assert env_b.unwrapped.backend.model is model  # one compiled model for both
+    before = _model_bytes(model)
+    env_a.reset(seed=0)
+    env_b.reset(seed=0)
+    frame_a = env_a.render()
+    frame_b = env_b.render()
+    assert frame_b.shape == (600, 800, 3)
+    env_b.step(np.ones(6, dtype=np.float32))
+    env_b.render()
+    assert _model_bytes(model) == before
+    np.testing.assert_array_equal(env_a.render(), frame_a)
+    assert frame_a.shape == (360, 480, 3)
+    env_a.close()
+    env_b.close()
+    assert _model_bytes(model) == before
+
+
+def test_compiled_addresses_are_read_only(arms):
+    backend = mjb.MuJoCoBackend(arms["ar6"], PhysicsConfig())
+    shared = backend.compiled
+    for index in (shared.qpos, shared.qvel, shared.actuators):
+        with pytest.raises(ValueError, match="read-only"):
+            index[0] = 0
+    with pytest.raises(TypeError):
+        shared.bodies["extra"] = 0
+    backend.close()
 
 
 # -- meshes MuJoCo cannot read (.ply, .dae): converted to .obj with trimesh into a cache folder
@@ -244,11 +303,11 @@ def _worst_fk_error(backend, robot: RobotModel, configs) -> float:
 
 
 @pytest.fixture
-def mesh_cache(tmp_path, monkeypatch) -> Path:
-    """The converted-mesh folder, under tmp_path; compiled models go to a private cache."""
+def mesh_cache(tmp_path, monkeypatch) -> Iterator[Path]:
+    """The converted-mesh folder, under tmp_path; the models built meanwhile are forgotten afterwards."""
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
-    monkeypatch.setattr(mjb, "_cache", OrderedDict())  # the models built here never reach other tests
-    return tmp_path / "cache" / "armreach" / "mujoco-meshes"
+    yield tmp_path / "cache" / "armreach" / "mujoco-meshes"
+    compiled.clear_cache()  # they name files under tmp_path
 
 
 @pytest.mark.parametrize("ext", ["ply", "dae"])
@@ -291,7 +350,7 @@ def test_meshes_mujoco_cannot_read_are_converted_and_cached(tmp_path, mesh_cache
 
     # converted once: a fresh build reads the cached .obj files without trimesh
     stamps = {path: path.stat().st_mtime_ns for path in converted.values()}
-    mjb.clear_cache()
+    compiled.clear_cache()
 
     def no_conversion(*args, **kwargs):
         raise AssertionError("the mesh was converted again")

@@ -72,7 +72,7 @@ def test_the_same_state_scores_identically_on_both_backends():
     offsets += list(rng.normal(scale=0.1, size=(20, 3)))
     for offset in offsets:
         state = ArmState(q=rng.uniform(-1, 1, 6), qd=rng.uniform(-1, 1, 6), ee_pos=target + np.asarray(offset))
-        first, second = (task.evaluate(state) for task in tasks)
+        first, second = (task.score(state) for task in tasks)
         assert first == second  # reward, success and every info value, exactly
         obs = [task.observation(state) for task in tasks]
         np.testing.assert_array_equal(obs[0], obs[1])
@@ -107,7 +107,7 @@ def test_teleported_arms_score_the_same():
         (state_a, task_a), (state_b, task_b) = results
         np.testing.assert_allclose(state_a.ee_pos, state_b.ee_pos, rtol=0, atol=1e-6)
         np.testing.assert_array_equal(state_a.q, state_b.q)
-        eval_a, eval_b = task_a.evaluate(state_a), task_b.evaluate(state_b)
+        eval_a, eval_b = task_a.score(state_a), task_b.score(state_b)
         assert eval_a.success == eval_b.success == (distance < 0.05)
         assert eval_a.reward == pytest.approx(eval_b.reward, abs=1e-5)
         assert eval_a.info.keys() == eval_b.info.keys()

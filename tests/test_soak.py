@@ -7,8 +7,9 @@ import json
 import pytest
 
 from armreach_core.cli import main
-from armreach_core.env import ArmEnv, load_backend_class
-from armreach_core.soak import Bounds, open_fds, rss_mb, soak_backend
+from armreach_core.env import ArmEnv
+from armreach_core.loading import load_backend_probes
+from armreach_core.tools.soak import Bounds, open_fds, rss_mb, soak_backend
 from tests.conftest import BACKENDS
 
 pytestmark = [
@@ -42,12 +43,13 @@ def test_the_measures_see_a_leak():
         assert open_fds() == fds + 1
     assert rss_mb() > 10.0
     if "pybullet" in BACKENDS:
-        cls = load_backend_class("pybullet")
-        before = cls.live_clients()
+        live_clients = load_backend_probes("pybullet").live_clients
+        assert live_clients is not None
+        before = live_clients()
         env = ArmEnv(backend="pybullet")
-        assert cls.live_clients() == before + 1
+        assert live_clients() == before + 1
         env.close()
-        assert cls.live_clients() == before
+        assert live_clients() == before
 
 
 def test_a_broken_bound_fails_the_soak():

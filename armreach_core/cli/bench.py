@@ -24,9 +24,9 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from armreach_core.bench import check_backends, run_bench, to_json, to_markdown
     from armreach_core.errors import ConfigError
     from armreach_core.plugins import available_backends
+    from armreach_core.tools.bench import check_backends, run_bench, to_json, to_markdown
 
     backends = args.backends or [b for b in available_backends() if _importable(b)]
     check_backends(backends)
@@ -39,7 +39,14 @@ def run(args: argparse.Namespace) -> int:
             sb3[algo] = int(n)
     if args.steps < 10 or args.repeats < 1:
         raise ConfigError("--steps must be >= 10 and --repeats >= 1")
-    results = run_bench(backends, steps=args.steps, repeats=args.repeats, vector=not args.no_vector, sb3_steps=sb3)
+    measure_sb3 = None
+    if sb3:
+        from armreach_core.rl.throughput import bench_sb3  # needs the rl extra; says so when missing
+
+        measure_sb3 = bench_sb3
+    results = run_bench(
+        backends, steps=args.steps, repeats=args.repeats, vector=not args.no_vector, sb3_steps=sb3, sb3=measure_sb3
+    )
     table = to_markdown(results)
     print(table)
     if args.out is not None:
@@ -51,8 +58,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _importable(backend: str) -> bool:
-    from armreach_core.env import load_backend_class
     from armreach_core.errors import BackendUnavailableError
+    from armreach_core.loading import load_backend_class
 
     try:
         load_backend_class(backend)

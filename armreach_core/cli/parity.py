@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from armreach_core.parity import ParityReport, markdown, run_parity
+from armreach_core.tools.parity import ParityReport, markdown, run_parity
 
 
 def add_parser(sub: Any) -> None:
@@ -20,9 +20,9 @@ def add_parser(sub: Any) -> None:
     parser.add_argument(
         "--backends",
         nargs="+",
-        default=["pybullet", "mujoco"],
+        default=None,
         metavar="NAME",
-        help="backends to compare, the first is the reference (default: pybullet mujoco)",
+        help="backends to compare, the first is the reference (default: every installed one, default backend first)",
     )
     parser.add_argument("--steps", type=int, default=200, help="env steps per control sequence (default: 200)")
     parser.add_argument(
@@ -39,7 +39,12 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     (out / "report.md").write_text(markdown(report))
     (out / "parity.json").write_text(json.dumps(report.to_json(), indent=1) + "\n")
-    plot(report, out / "parity.png")
+    saved = [out / "report.md", out / "parity.json"]
+    try:
+        plot(report, out / "parity.png")
+        saved.append(out / "parity.png")
+    except ImportError:
+        print("no parity.png: plots need matplotlib (`pip install 'armreach[rl]'` or `pip install matplotlib`)")
     for name, kin in report.kinematic.items():
         print(f"{name:>10}  FK max error {kin.max_m:.1e} m   {report.steps_per_second(name):,.0f} env steps/s")
     for name in report.backends[1:]:
@@ -51,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
             )
     failures = report.failures()
     print("PASS: every number is within tolerance" if not failures else "FAIL: " + "; ".join(failures))
-    print(f"saved {out / 'report.md'}, {out / 'parity.json'} and {out / 'parity.png'}")
+    print("saved " + ", ".join(str(path) for path in saved))
     return 0 if not failures else 1
 
 

@@ -10,13 +10,14 @@ from typing import Any
 
 import numpy as np
 
+from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.env import ArmEnv
 from armreach_core.ik import IKPolicy
 
 
 def add_parser(sub: Any) -> None:
     parser = sub.add_parser("rollout", help="run one seeded episode and save a rendered PNG")
-    parser.add_argument("--backend", default="pybullet", help="physics backend (default: pybullet)")
+    parser.add_argument("--backend", default=DEFAULT_BACKEND, help=f"physics backend (default: {DEFAULT_BACKEND})")
     parser.add_argument("--urdf", default=None, help="URDF of the arm (default: the bundled ar6)")
     parser.add_argument("--ee-link", default=None, help="end-effector link (default: the chain's tip)")
     parser.add_argument("--policy", choices=("ik", "random"), default="ik", help="controller (default: ik)")
@@ -30,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or Path("runs") / time.strftime("rollout-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     env = ArmEnv(
-        "reach",
+        DEFAULT_TASK,
         backend=args.backend,
         urdf=args.urdf,
         ee_link=args.ee_link,

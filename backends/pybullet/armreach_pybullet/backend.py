@@ -144,10 +144,41 @@ class PyBulletBackend(Backend):
         self._kp = [POSITION_GAIN] * self.robot.dof
         self._kd = [VELOCITY_GAIN] * self.robot.dof
 
-    @classmethod
-    def live_clients(cls) -> int:
-        """Connected PyBullet clients in this process (every backend holds one until closed)."""
-        return sum(1 for client in range(MAX_CLIENTS) if pb.isConnected(physicsClientId=client))
+    # -- engine handles (for probes and tests; read-only) ---------------------------------
+    @property
+    def client(self) -> int:
+        """This backend's PyBullet client id (``physicsClientId``)."""
+        return int(self._client)
+
+    @property
+    def body(self) -> int:
+        """The robot's PyBullet body id."""
+        return int(self._body)
+
+    @property
+    def joint_indices(self) -> list[int]:
+        """PyBullet joint indices of the actuated joints, in ``robot.joint_names`` order."""
+        return list(self._joints)
+
+    def link_index(self, link: str) -> int:
+        """PyBullet link index of URDF link ``link`` (-1: the base)."""
+        try:
+            return self._link_index[link]
+        except KeyError:
+            raise ArmReachError(f"link {link!r} is not part of {self.robot.name!r}") from None
+
+    @property
+    def motor_forces(self) -> list[float]:
+        """Maximum motor force per actuated joint (the URDF effort)."""
+        return list(self._forces)
+
+    @property
+    def position_gains(self) -> list[float]:
+        return list(self._kp)
+
+    @property
+    def velocity_gains(self) -> list[float]:
+        return list(self._kd)
 
     # -- control -----------------------------------------------------------------------
     def reset_joints(self, q: npt.ArrayLike) -> None:
@@ -188,33 +219,11 @@ class PyBulletBackend(Backend):
         return ArmState(q, qd, np.array(ee), NO_OBJECTS)
 
     def link_position(self, link: str) -> FloatArray:
-        try:
-            index = self._link_index[link]
-        except KeyError:
-            raise ArmReachError(f"link {link!r} is not part of {self.robot.name!r}") from None
+        index = self.link_index(link)
         if index < 0:
             return np.array(pb.getBasePositionAndOrientation(self._body, physicsClientId=self._client)[0])
         state = pb.getLinkState(self._body, index, computeForwardKinematics=True, physicsClientId=self._client)
         return np.array(state[4])
-
-    def bare_loop(self, deltas: FloatArray) -> None:
-        cid, body, joints, substeps = self._client, self._body, self._joints, self.physics.substeps
-        lower, upper = self.robot.lower, self.robot.upper
-        ee = self._link_index[self.robot.ee_link]
-        forces, kp, kd, control = self._forces, self._kp, self._kd, pb.POSITION_CONTROL
-        q = np.array([s[0] for s in pb.getJointStates(body, joints, physicsClientId=cid)])
-        for delta in deltas:
-            target = np.minimum(np.maximum(q + delta, lower), upper)
-            pb.setJointMotorControlArray(
-                body, joints, control, targetPositions=target.tolist(), forces=forces,
-                positionGains=kp, velocityGains=kd, physicsClientId=cid,
-            )  # fmt: skip
-            for _ in range(substeps):
-                pb.stepSimulation(physicsClientId=cid)
-            states = pb.getJointStates(body, joints, physicsClientId=cid)
-            q = np.array([s[0] for s in states])
-            _qd = [s[1] for s in states]
-            _ee = pb.getLinkState(body, ee, computeForwardKinematics=True, physicsClientId=cid)[4]
 
     # -- bodies, contacts, friction ---------------------------------------------------------
     def add_box(

@@ -27,7 +27,7 @@ _DOC = """The bundled arm with a parallel gripper picks a cube from a table and 
     ## Observation space
 
     ``Box(low, high, (38,), float32)``; values are clipped into the bounds below, as
-    :func:`~armreach_core.reach_env.observation_table` builds them from the task (a test
+    the task's ``layout.table()`` builds them (a test
     keeps this table equal to the code):
 
     | index | component | unit | low | high | notes |
@@ -69,7 +69,9 @@ _DOC = """The bundled arm with a parallel gripper picks a cube from a table and 
     * Termination: success (``d < success_threshold``, 0.03 m); a non-finite physics
       state (``info["physics_unstable"]``); with ``joint_limit_mode="terminate"``, an arm
       target outside the joint limits.
-    * Truncation: ``max_episode_steps`` (100 through ``gym.make``; 2048 for the class).
+    * Truncation: after ``max_episode_steps`` steps (100): Gymnasium's ``TimeLimit`` under
+      ``gym.make`` (``spec.max_episode_steps``), the env itself when this class is
+      constructed directly.
 
     ## Arguments
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-from armreach_core import RobotSpec, TaskSpec, hookimpl
+from armreach_core import RobotSpec, Task, TaskSpec, hookimpl
 from armreach_core.specs import Register
 
 ROBOT = "ar6-gripper"
@@ -18,7 +18,7 @@ def gripper_urdf() -> Path:
     return Path(str(resources.files("armreach_grasp.assets").joinpath("ar6_gripper", "ar6_gripper.urdf")))
 
 
-def _grasp_task() -> type:
+def _grasp_task() -> type[Task]:
     from armreach_grasp.task import GraspTask
 
     return GraspTask
@@ -32,7 +32,7 @@ def armreach_register_tasks(register: Register) -> None:
             env_id="armreach/Grasp-v0",
             load=_grasp_task,
             robot=ROBOT,
-            defaults={"max_episode_steps": 100},
+            max_episode_steps=100,
             entry_point="armreach_grasp.env:ArmGraspEnv",
             description="pick a cube from a table with a parallel gripper and lift it 10 cm",
         )

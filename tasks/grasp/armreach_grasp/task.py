@@ -29,7 +29,7 @@ from gymnasium import spaces
 from armreach_core import ConfigError
 from armreach_core.backend import ArmState
 from armreach_core.robot import FloatArray, RobotModel
-from armreach_core.task import Component, Evaluation, Scene, Task
+from armreach_core.task import Component, GoalArray, ObservationLayout, Scene, Task, goal_distance
 
 OBJECT, TABLE, GOAL_MARKER = "object", "table", "goal"
 #: The table: a fixed box whose top is at z = 5 cm (m, base frame).
@@ -113,12 +113,10 @@ class GraspTask(Task):
         self.arm_dof = robot.arm_dof
         self.object_start: FloatArray = np.array([*(low + high) / 2, TABLE_TOP + self.object_size / 2])
         self.goal: FloatArray = self.object_start + [0.0, 0.0, self.lift_height]
-        self._components = self._layout()
-        self._low = np.concatenate([c.low for c in self._components]).astype(np.float32)
-        self._high = np.concatenate([c.high for c in self._components]).astype(np.float32)
+        self.layout = ObservationLayout(self._components())
 
     # -- spaces ------------------------------------------------------------------------
-    def _layout(self) -> list[Component]:
+    def _components(self) -> list[Component]:
         robot, n = self.robot, self.robot.dof
         box, ones = np.full(3, WORKSPACE), np.ones(4)
         vel = 2.0 * robot.velocity_limits
@@ -136,12 +134,8 @@ class GraspTask(Task):
             blocks.append(Component("goal position", 3, "m", -box, box, "p_g, the start raised by lift_height"))
         return blocks
 
-    def components(self) -> list[Component]:
-        """The blocks of the flat observation, in order (used for docs, bounds and :meth:`unpack`)."""
-        return list(self._components)
-
     def observation_space(self) -> spaces.Space[Any]:
-        flat = spaces.Box(self._low, self._high, dtype=np.float32)
+        flat = self.layout.box()
         if not self.goal_conditioned:
             return flat
         box = np.full(3, WORKSPACE, dtype=np.float32)
@@ -150,13 +144,10 @@ class GraspTask(Task):
 
     def unpack(self, observation: Any) -> dict[str, FloatArray]:
         """The observation's blocks by component name (plus ``goal position`` when goal-conditioned)."""
-        flat = observation["observation"] if self.goal_conditioned else observation
-        out, start = {}, 0
-        for comp in self._components:
-            out[comp.name] = np.asarray(flat[start : start + comp.size], dtype=np.float64)
-            start += comp.size
-        if self.goal_conditioned:
-            out["goal position"] = np.asarray(observation["desired_goal"], dtype=np.float64)
+        if not self.goal_conditioned:
+            return self.layout.unpack(observation)
+        out = self.layout.unpack(observation["observation"])
+        out["goal position"] = np.asarray(observation["desired_goal"], dtype=np.float64)
         return out
 
     # -- actions -----------------------------------------------------------------------
@@ -215,7 +206,7 @@ class GraspTask(Task):
                 *([] if self.goal_conditioned else [self.goal]),
             ]
         )
-        flat = np.clip(flat, self._low, self._high).astype(np.float32)
+        flat = np.clip(flat, self.layout.low, self.layout.high).astype(np.float32)
         if not self.goal_conditioned:
             return flat
         return {
@@ -224,26 +215,20 @@ class GraspTask(Task):
             "desired_goal": self.goal.astype(np.float32),
         }
 
-    def evaluate(self, state: ArmState) -> Evaluation:
-        # Scored from the float32 values the agent observes, so that the invariant
-        # reward == compute_reward(achieved_goal, desired_goal, info) holds exactly.
-        achieved = state.objects[OBJECT].position.astype(np.float32)
-        desired = self.goal.astype(np.float32)
-        grip = float(np.linalg.norm(achieved.astype(np.float64) - state.ee_pos.astype(np.float32)))
-        info: dict[str, Any] = {
-            "distance": float(self._distance(achieved, desired)),
-            "gripper_to_object": grip,
-            "lift": float(achieved[2] - self.object_start[2]),
-        }
-        success = bool(self.compute_terminated(achieved, desired, info))
-        info["is_success"] = success
-        reward = float(self.compute_reward(achieved, desired, info))
-        return Evaluation(reward=reward, success=success, info=info)
+    # -- scoring: one path, pure and batch-friendly ---------------------------------------
+    def achieved_goal(self, state: ArmState) -> GoalArray:
+        return state.objects[OBJECT].position.astype(np.float32)
 
-    # -- pure, batch-friendly ----------------------------------------------------------
-    def _distance(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        diff = np.asarray(achieved_goal, dtype=np.float64) - np.asarray(desired_goal, dtype=np.float64)
-        return np.asarray(np.linalg.norm(diff, axis=-1))
+    def desired_goal(self) -> GoalArray:
+        return self.goal.astype(np.float32)
+
+    def step_info(self, state: ArmState, achieved_goal: GoalArray, desired_goal: GoalArray) -> dict[str, Any]:
+        grip = goal_distance(achieved_goal, state.ee_pos.astype(np.float32))
+        return {
+            "distance": float(goal_distance(achieved_goal, desired_goal)),
+            "gripper_to_object": float(grip),
+            "lift": float(achieved_goal[2] - self.object_start[2]),
+        }
 
     @staticmethod
     def _grip_distance(info: Any, shape: tuple[int, ...]) -> npt.NDArray[np.float64]:
@@ -254,15 +239,11 @@ class GraspTask(Task):
             raise ValueError("the dense grasp reward needs info['gripper_to_object'] (pass the step's info)")
         return np.asarray([float(i["gripper_to_object"]) for i in np.asarray(info).ravel()]).reshape(shape)
 
-    def compute_reward(
-        self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any
-    ) -> npt.NDArray[np.float64]:
-        distance = self._distance(achieved_goal, desired_goal)
+    def compute_reward(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any) -> Any:
+        distance = np.asarray(goal_distance(achieved_goal, desired_goal))
         if self.reward_type == "sparse":
-            return np.asarray(-(distance >= self.success_threshold).astype(np.float64))
-        return np.asarray(-distance - self._grip_distance(info, distance.shape))
+            return -(distance >= self.success_threshold).astype(np.float64)
+        return -distance - self._grip_distance(info, distance.shape)
 
-    def compute_terminated(
-        self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any
-    ) -> npt.NDArray[np.bool_]:
-        return np.asarray(self._distance(achieved_goal, desired_goal) < self.success_threshold)
+    def compute_terminated(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any) -> Any:
+        return np.asarray(goal_distance(achieved_goal, desired_goal)) < self.success_threshold

@@ -25,7 +25,7 @@ from gymnasium import spaces
 from armreach_core import ConfigError, Task
 from armreach_core.backend import ArmState
 from armreach_core.robot import FloatArray, RobotModel
-from armreach_core.task import Evaluation, Scene
+from armreach_core.task import Component, GoalArray, ObservationLayout, Scene, goal_distance
 
 MARKER = "point"
 BOUND = 2.0  # m, on positions in the observation
@@ -56,13 +56,19 @@ class MyTask(Task):
         self.height, self.threshold = float(height), float(threshold)
         self.low, self.high = np.asarray(spot_range, dtype=np.float64)
         self.point: FloatArray = np.array([*(self.low + self.high) / 2, self.height])
-        vel = 2.0 * robot.velocity_limits
-        box = np.full(3, BOUND)
-        self._low = np.concatenate([robot.lower, -vel, -box, -box]).astype(np.float32)
-        self._high = np.concatenate([robot.upper, vel, box, box]).astype(np.float32)
+        vel, box, n = 2.0 * robot.velocity_limits, np.full(3, BOUND), robot.dof
+        # One declaration of the observation: slices, bounds and the docstring table come from it.
+        self.layout = ObservationLayout(
+            [
+                Component("joint angles", n, "rad", robot.lower, robot.upper, "θ"),
+                Component("joint velocities", n, "rad/s", -vel, vel, "θ̇"),
+                Component("end-effector position", 3, "m", -box, box, "p_e"),
+                Component("point", 3, "m", -box, box, "the point to hold"),
+            ]
+        )
 
     def observation_space(self) -> spaces.Space[Any]:
-        return spaces.Box(self._low, self._high, dtype=np.float32)
+        return self.layout.box()
 
     # Override action_size() and joint_targets() to map actions differently (the grasp task
     # adds a gripper command); the default is one relative joint step per actuated joint.
@@ -76,23 +82,22 @@ class MyTask(Task):
 
     def observation(self, state: ArmState) -> Any:
         flat = np.concatenate([state.q, state.qd, state.ee_pos, self.point])
-        return np.clip(flat, self._low, self._high).astype(np.float32)
+        return np.clip(flat, self.layout.low, self.layout.high).astype(np.float32)
 
-    def evaluate(self, state: ArmState) -> Evaluation:
-        achieved, desired = state.ee_pos.astype(np.float32), self.point.astype(np.float32)
-        distance = float(np.linalg.norm(achieved - desired))
-        success = bool(self.compute_terminated(achieved, desired, None))
-        info = {"distance": distance, "is_success": success}
-        return Evaluation(reward=float(self.compute_reward(achieved, desired, None)), success=success, info=info)
+    # Scoring: the env calls score(state), which the base class builds from these, so that
+    # reward == compute_reward(achieved_goal, desired_goal, info) always holds.
+    def achieved_goal(self, state: ArmState) -> GoalArray:
+        return state.ee_pos.astype(np.float32)
+
+    def desired_goal(self) -> GoalArray:
+        return self.point.astype(np.float32)
+
+    def step_info(self, state: ArmState, achieved_goal: GoalArray, desired_goal: GoalArray) -> dict[str, Any]:
+        return {"distance": float(goal_distance(achieved_goal, desired_goal))}
 
     # Pure functions of goals, shape (3,) or (batch, 3): HER relabels with them.
-    def compute_reward(
-        self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any
-    ) -> npt.NDArray[np.float64]:
-        diff = np.asarray(achieved_goal, dtype=np.float64) - np.asarray(desired_goal, dtype=np.float64)
-        return np.asarray(-np.linalg.norm(diff, axis=-1))
+    def compute_reward(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any) -> Any:
+        return -goal_distance(achieved_goal, desired_goal)
 
-    def compute_terminated(
-        self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any
-    ) -> npt.NDArray[np.bool_]:
-        return np.asarray(-self.compute_reward(achieved_goal, desired_goal, info) < self.threshold)
+    def compute_terminated(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any) -> Any:
+        return goal_distance(achieved_goal, desired_goal) < self.threshold

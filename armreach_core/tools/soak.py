@@ -7,7 +7,7 @@ For each backend, :func:`soak_backend` runs
   process's resident memory (RSS) as it goes; and
 * **cycles**: ``cycles`` times create an env, reset it, step it a few times and close
   it, counting resident memory, open file descriptors and live engine clients
-  (:meth:`armreach_core.backend.Backend.live_clients`; PyBullet counts its connected
+  (:attr:`armreach_core.specs.BackendProbes.live_clients`; PyBullet counts its connected
   clients, engines without clients report ``None``) before and after.
 
 Growth is measured from a point after a warm-up (allocator pools, caches and lazy
@@ -28,7 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from armreach_core.env import ArmEnv, load_backend_class
+from armreach_core.env import ArmEnv
+from armreach_core.loading import load_backend_probes
 
 
 @dataclass(frozen=True)
@@ -163,7 +164,7 @@ def _steps(
 
 
 def _cycles(backend: str, cycles: int, seed: int, progress: Callable[[str], None] | None) -> CyclesReport:
-    backend_cls = load_backend_class(backend)
+    live_clients = load_backend_probes(backend).live_clients
     rng = np.random.default_rng(seed)
 
     def cycle() -> None:
@@ -173,7 +174,7 @@ def _cycles(backend: str, cycles: int, seed: int, progress: Callable[[str], None
             env.step(rng.uniform(-1.0, 1.0, env.robot.dof))
         env.close()
 
-    clients_before = backend_cls.live_clients()
+    clients_before = live_clients() if live_clients is not None else None
     warmup = min(max(cycles // 10, 1), 20)
     for _ in range(warmup):
         cycle()
@@ -187,7 +188,7 @@ def _cycles(backend: str, cycles: int, seed: int, progress: Callable[[str], None
     seconds = time.perf_counter() - t0
     gc.collect()
     end_rss, end_fds = rss_mb(), open_fds()
-    clients_after = backend_cls.live_clients()
+    clients_after = live_clients() if live_clients is not None else None
     return CyclesReport(
         cycles=cycles,
         seconds=round(seconds, 2),

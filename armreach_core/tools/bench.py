@@ -1,9 +1,10 @@
 """``armreach bench``: what an env step costs next to the engine's own loop, and more.
 
 For each backend, in one run: the bare engine loop doing the physics of one env step
-(:meth:`Backend.bare_loop`), the full env step with random actions, reset, env
+(the backend plugin's :class:`~armreach_core.specs.BackendProbes`), the full env step with random actions, reset, env
 creation with the model cached, vectorized throughput with 1 and 2 worker processes,
-and Stable-Baselines3 training throughput with the paper preset (PPO and DDPG).
+and, when the ``rl`` extra is installed, Stable-Baselines3 training throughput with the
+paper preset (:mod:`armreach_core.rl.throughput`).
 """
 
 from __future__ import annotations
@@ -18,8 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from armreach_core.env import ArmEnv, load_backend_class
+from armreach_core.env import ArmEnv
 from armreach_core.errors import ArmReachError
+from armreach_core.loading import load_backend_class, load_backend_probes
 
 #: Targets the numbers are held to.
 TARGETS = {"step_over_bare": 1.25, "reset_ms": 1.0, "create_ms": 50.0}
@@ -57,6 +59,10 @@ def bench_bare(env: ArmEnv, steps: int, repeats: int) -> float:
     poses and contacts rather than the bare loop random-walking into the joint limits
     and the ground, where the physics costs more.
     """
+    bare_loop = load_backend_probes(env.backend_name).bare_loop
+    if bare_loop is None:
+        raise NotImplementedError(f"backend {env.backend_name!r} offers no bare loop for benchmarks")
+    backend = env.backend
     deltas = _deltas(steps, env.robot.dof, env.max_joint_step)
     episodes = [deltas[i : i + env.max_episode_steps] for i in range(0, steps, env.max_episode_steps)]
 
@@ -65,7 +71,7 @@ def bench_bare(env: ArmEnv, steps: int, repeats: int) -> float:
         env.reset(seed=0)
         for episode in episodes:
             t0 = time.perf_counter()
-            env.backend.bare_loop(episode)
+            bare_loop(backend, episode)
             total += time.perf_counter() - t0
             env.reset()
         return total
@@ -134,39 +140,6 @@ def bench_vector(backend: str, workers: int, steps: int) -> float:
         vec.close()
 
 
-def bench_sb3(
-    backend: str, algo: str, steps: int, threads: int | None = None, settings: dict[str, Any] | None = None
-) -> float:
-    """Env steps/s while training ``algo`` with the paper preset (after its warm-up).
-
-    ``threads``: torch CPU threads; default what ``armreach train`` uses (see
-    :func:`armreach_core.rl.train.configure_threads`). ``settings``: preset values to
-    change, e.g. ``{"train_freq": 4, "gradient_steps": 1}``.
-    """
-    import tempfile
-    from pathlib import Path
-
-    from armreach_core.rl.agents import build_model, make_vec_env
-    from armreach_core.rl.train import configure_threads, resolve_config
-
-    config = resolve_config(algo=algo, preset="paper", backend=backend)
-    config["settings"].update(settings or {})
-    if threads is not None:
-        config["settings"]["torch_threads"] = threads
-    configure_threads(config["settings"], "cpu")
-    with tempfile.TemporaryDirectory() as tmp:
-        env = make_vec_env(config, Path(tmp), 0, 1, append=False)
-        try:
-            model = build_model(algo, config["settings"], env, 0, None, "cpu")
-            warm = 2048 if algo == "ppo" else int(model.learning_starts) + 50
-            model.learn(warm)
-            t0 = time.perf_counter()
-            model.learn(steps, reset_num_timesteps=False)
-            return (int(model.num_timesteps) - warm) / (time.perf_counter() - t0)
-        finally:
-            env.close()
-
-
 def run_bench(
     backends: Sequence[str],
     *,
@@ -174,9 +147,14 @@ def run_bench(
     repeats: int = 3,
     vector: bool = True,
     sb3_steps: dict[str, int] | None = None,
+    sb3: Callable[[str, str, int], float] | None = None,
     log: Callable[[str], None] = print,
 ) -> list[BackendBench]:
-    """Measure every backend; ``sb3_steps`` maps algorithm → timed training steps (None: skip)."""
+    """Measure every backend.
+
+    ``sb3_steps`` maps algorithm → timed training steps, measured by ``sb3(backend, algo,
+    steps)`` (:func:`armreach_core.rl.throughput.bench_sb3`); skipped when either is None.
+    """
     results = []
     for name in backends:
         load_backend_class(name)  # a clear error now if the engine is missing
@@ -210,9 +188,10 @@ def run_bench(
             for workers in (1, 2):
                 result.vector_steps_per_s[workers] = bench_vector(name, workers, steps)
             log(f"{name}: vectorized {result.vector_steps_per_s}")
-        for algo, n in (sb3_steps or {}).items():
-            result.sb3_steps_per_s[algo] = bench_sb3(name, algo, n)
-            log(f"{name}: SB3 {algo} (paper preset) {result.sb3_steps_per_s[algo]:,.0f} steps/s")
+        if sb3 is not None:
+            for algo, n in (sb3_steps or {}).items():
+                result.sb3_steps_per_s[algo] = sb3(name, algo, n)
+                log(f"{name}: SB3 {algo} (paper preset) {result.sb3_steps_per_s[algo]:,.0f} steps/s")
         results.append(result)
     return results
 

@@ -32,9 +32,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
 from armreach_core.ik import IKPolicy
+from armreach_core.plugins import available_backends
 from armreach_core.reach import ReachTask
 from armreach_core.robot import FloatArray
 
@@ -246,7 +248,7 @@ def drive(env: ArmEnv, sequence: str, steps: int, seed: int) -> Trajectory:
 
 
 def run_parity(
-    backends: Sequence[str] = ("pybullet", "mujoco"),
+    backends: Sequence[str] | None = None,
     urdf: str | os.PathLike[str] | None = None,
     ee_link: str | None = None,
     *,
@@ -258,7 +260,8 @@ def run_parity(
     """Measure kinematic and dynamic parity and speed of ``backends`` (the first is the reference).
 
     Args:
-        backends: two or more registered backend names.
+        backends: two or more registered backend names; default every registered one,
+            :data:`~armreach_core.defaults.DEFAULT_BACKEND` first.
         urdf: the arm; default the bundled ar6.
         ee_link: the end-effector link; default the robot's.
         steps: env steps of each control sequence.
@@ -270,6 +273,9 @@ def run_parity(
         BackendUnavailableError: a backend is not installed (the message says how to install it).
         ConfigError: fewer than two distinct backends, or bad counts.
     """
+    if backends is None:
+        registered = available_backends()
+        backends = sorted(registered, key=lambda name: name != DEFAULT_BACKEND)
     names = tuple(dict.fromkeys(backends))
     if len(names) < 2:
         raise ConfigError(f"parity compares two or more distinct backends; got {list(backends)}")
@@ -278,7 +284,7 @@ def run_parity(
     envs: dict[str, ArmEnv] = {}
     try:
         for name in names:
-            envs[name] = ArmEnv("reach", backend=name, urdf=urdf, ee_link=ee_link)
+            envs[name] = ArmEnv(DEFAULT_TASK, backend=name, urdf=urdf, ee_link=ee_link)
         first = envs[names[0]]
         robot = first.robot
         report = ParityReport(

@@ -1,0 +1,39 @@
+"""Training throughput of Stable-Baselines3 on an armreach env, for ``armreach bench``."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+
+def bench_sb3(
+    backend: str, algo: str, steps: int, threads: int | None = None, settings: dict[str, Any] | None = None
+) -> float:
+    """Env steps/s while training ``algo`` with the paper preset (after its warm-up).
+
+    ``threads``: torch CPU threads; default what ``armreach train`` uses (see
+    :func:`armreach_core.rl.train.configure_threads`). ``settings``: preset values to
+    change, e.g. ``{"train_freq": 4, "gradient_steps": 1}``.
+    """
+    import tempfile
+    from pathlib import Path
+
+    from armreach_core.rl.agents import build_model, make_vec_env
+    from armreach_core.rl.train import configure_threads, resolve_config
+
+    config = resolve_config(algo=algo, preset="paper", backend=backend)
+    config["settings"].update(settings or {})
+    if threads is not None:
+        config["settings"]["torch_threads"] = threads
+    configure_threads(config["settings"], "cpu")
+    with tempfile.TemporaryDirectory() as tmp:
+        env = make_vec_env(config, Path(tmp), 0, 1, append=False)
+        try:
+            model = build_model(algo, config["settings"], env, 0, None, "cpu")
+            warm = 2048 if algo == "ppo" else int(model.learning_starts) + 50
+            model.learn(warm)
+            t0 = time.perf_counter()
+            model.learn(steps, reset_num_timesteps=False)
+            return (int(model.num_timesteps) - warm) / (time.perf_counter() - t0)
+        finally:
+            env.close()

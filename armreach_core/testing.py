@@ -1,0 +1,157 @@
+"""The backend contract: one suite every backend runs from its own distribution's tests.
+
+A backend's test folder subclasses :class:`BackendContract` and names its backend::
+
+    from armreach_core.testing import BackendContract
+
+    class TestMyEngine(BackendContract):
+        backend = "my-engine"
+
+Every test goes through public API only: the backend is built from the bundled robot (and
+optionally another URDF, :attr:`BackendContract.urdf`) and checked against the URDF model,
+which knows no engine. The suite needs pytest; it skips when the backend's engine is not
+installed.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from typing import ClassVar
+
+import numpy as np
+import pytest
+
+from armreach_core.backend import Backend, Camera, PhysicsConfig
+from armreach_core.defaults import DEFAULT_ROBOT
+from armreach_core.errors import ArmReachError, BackendUnavailableError
+from armreach_core.loading import load_backend_class, load_robot, robot_spec
+from armreach_core.robot import RobotModel
+
+#: How far the engine's end effector may sit from the URDF's forward kinematics (m).
+FK_TOLERANCE = 1e-6
+
+
+class BackendContract:
+    """What every backend must do. Subclass it in a test module and set :attr:`backend`."""
+
+    #: The registered backend name under test.
+    backend: ClassVar[str]
+    #: A URDF to test instead of the bundled robot (``None``: the bundled robot).
+    urdf: ClassVar[str | os.PathLike[str] | None] = None
+
+    # -- fixtures ----------------------------------------------------------------------
+    @pytest.fixture
+    def robot(self) -> RobotModel:
+        if self.urdf is not None:
+            return load_robot(self.urdf)
+        spec = robot_spec(DEFAULT_ROBOT)
+        return load_robot(spec.urdf, spec.ee_link, spec.home)
+
+    @pytest.fixture
+    def engine(self) -> type[Backend]:
+        try:
+            return load_backend_class(self.backend)
+        except BackendUnavailableError as exc:
+            pytest.skip(str(exc))
+
+    @pytest.fixture
+    def world(self, engine: type[Backend], robot: RobotModel) -> Iterator[Backend]:
+        backend = engine(robot, PhysicsConfig())
+        yield backend
+        backend.close()
+
+    # -- the contract ------------------------------------------------------------------
+    def test_name_matches_the_registration(self, engine: type[Backend]) -> None:
+        assert engine.name == self.backend
+
+    def test_reset_teleports_to_the_pose_at_rest(self, world: Backend, robot: RobotModel) -> None:
+        q = robot.clip(robot.home + 0.1)
+        world.reset_joints(q)
+        got, qd = world.joint_state()
+        np.testing.assert_allclose(got, q, atol=1e-9)
+        np.testing.assert_allclose(qd, 0.0, atol=1e-9)
+
+    def test_state_is_one_snapshot_that_matches_the_urdf(self, world: Backend, robot: RobotModel) -> None:
+        rng = np.random.default_rng(0)
+        world.reset_joints(robot.home)
+        for _ in range(5):
+            world.set_joint_targets(robot.clip(world.joint_state()[0] + rng.uniform(-0.05, 0.05, robot.dof)))
+            world.step()
+            state = world.read_state()
+            np.testing.assert_allclose(state.ee_pos, robot.forward_kinematics(state.q), atol=FK_TOLERANCE)
+            np.testing.assert_allclose(world.link_position(robot.ee_link), state.ee_pos, atol=1e-12)
+
+    def test_position_control_holds_and_tracks(self, world: Backend, robot: RobotModel) -> None:
+        world.reset_joints(robot.home)
+        for _ in range(24):  # one second at the default control rate
+            world.step()
+        np.testing.assert_allclose(world.joint_state()[0], robot.home, atol=0.02)  # held against gravity
+        target = robot.clip(robot.home + 0.1)
+        world.set_joint_targets(target)
+        for _ in range(48):
+            world.step()
+        np.testing.assert_allclose(world.joint_state()[0], target, atol=0.02)
+        assert not world.diverged()
+
+    def test_same_inputs_give_the_same_motion(self, engine: type[Backend], robot: RobotModel) -> None:
+        def run() -> np.ndarray[tuple[int, ...], np.dtype[np.float64]]:
+            world = engine(robot, PhysicsConfig())
+            try:
+                world.reset_joints(robot.home)
+                rng = np.random.default_rng(1)
+                for _ in range(20):
+                    world.set_joint_targets(robot.clip(world.joint_state()[0] + rng.uniform(-0.05, 0.05, robot.dof)))
+                    world.step()
+                return np.concatenate(world.joint_state())
+            finally:
+                world.close()
+
+        np.testing.assert_array_equal(run(), run())
+
+    def test_worlds_are_isolated(self, engine: type[Backend], robot: RobotModel) -> None:
+        a, b = engine(robot, PhysicsConfig()), engine(robot, PhysicsConfig())
+        try:
+            a.reset_joints(robot.home)
+            b.reset_joints(robot.home)
+            a.set_joint_targets(robot.clip(robot.home + 0.2))
+            for _ in range(10):
+                a.step()
+            np.testing.assert_allclose(b.joint_state()[0], robot.home, atol=1e-9)
+        finally:
+            a.close()
+            b.close()
+
+    def test_unknown_link_is_an_armreach_error(self, world: Backend) -> None:
+        with pytest.raises(ArmReachError, match="not part of"):
+            world.link_position("no-such-link")
+
+    def test_markers_and_rendering_need_no_display(self, world: Backend, robot: RobotModel) -> None:
+        world.add_marker("contract-marker", 0.05, (1.0, 0.0, 0.0, 1.0))
+        world.reset_joints(robot.home)
+        world.set_marker("contract-marker", robot.forward_kinematics(robot.home))
+        image = world.render(Camera(width=64, height=48))
+        assert image.shape == (48, 64, 3)
+        assert image.dtype == np.uint8
+        assert image.std() > 1.0  # not blank
+
+    def test_a_free_box_falls_and_rests_on_the_ground(self, world: Backend, robot: RobotModel) -> None:
+        try:
+            world.add_box("contract-box", (0.02, 0.02, 0.02), 0.1, position=(0.0, -0.6, 0.3))
+        except NotImplementedError:
+            pytest.skip(f"backend {self.backend!r} has no bodies")
+        world.reset_joints(robot.home)
+        world.set_body_pose("contract-box", (0.0, -0.6, 0.3))
+        assert world.free_bodies() == ("contract-box",)
+        for _ in range(48):
+            world.step()
+        body = world.body_state("contract-box")
+        assert body.is_finite()
+        assert abs(body.position[2] - 0.02) < 0.005  # resting on the ground
+        assert np.linalg.norm(body.linear_velocity) < 0.01
+        assert world.read_state().objects["contract-box"].position[2] == pytest.approx(body.position[2])
+
+    def test_close_twice_is_safe(self, engine: type[Backend], robot: RobotModel) -> None:
+        world = engine(robot, PhysicsConfig())
+        world.close()
+        world.close()

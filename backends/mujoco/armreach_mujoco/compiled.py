@@ -1,0 +1,139 @@
+"""Compiled models, built once per (URDF, physics, extras) and shared read-only by every env.
+
+:func:`compiled_model` is the only way in: it builds the ``MjSpec`` (the URDF import, the
+servos, the world), compiles it, writes the servo gains and caches the result. From then
+on the ``MjModel`` is shared, and nothing may write it: each env has its own ``MjData``,
+and a renderer its own copy of the model (:mod:`armreach_mujoco.render`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+from collections import OrderedDict
+from collections.abc import Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from armreach_core.backend import PhysicsConfig
+from armreach_core.errors import URDFError
+from armreach_core.robot import RobotModel
+from armreach_mujoco import servo, world
+from armreach_mujoco.urdf_import import spec_from_urdf
+from armreach_mujoco.world import Extras
+
+MODEL_CACHE_SIZE = 32
+
+Index = npt.NDArray[np.intp]
+
+
+@dataclass(frozen=True)
+class CompiledModel:
+    """A compiled model and the addresses of what the backend reads and writes, by name.
+
+    Attributes:
+        model: the ``mujoco.MjModel``, shared by every env built from the same inputs: read only.
+        qpos, qvel, actuators: addresses of the robot's joints in ``qpos``, ``qvel`` and
+            ``ctrl``, in ``robot.joint_names`` order (read-only arrays).
+        bodies: MuJoCo body id by MuJoCo body name (URDF links keep their names).
+        mocap: mocap index of each marker, by marker name.
+        free: ``(qpos address, dof address)`` of each free box's joint, by box name.
+    """
+
+    model: Any
+    qpos: Index
+    qvel: Index
+    actuators: Index
+    bodies: Mapping[str, int]
+    mocap: Mapping[str, int]
+    free: Mapping[str, tuple[int, int]]
+
+
+_cache: OrderedDict[tuple[Any, ...], CompiledModel] = OrderedDict()
+_cache_lock = threading.Lock()
+
+
+def _index(values: list[int]) -> Index:
+    array = np.array(values, dtype=np.intp)
+    array.flags.writeable = False
+    return array
+
+
+def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> CompiledModel:
+    """Build and compile a model (uncached: use :func:`compiled_model`)."""
+    spec = spec_from_urdf(robot)
+    world.set_options(spec, physics)
+    world.set_arm_contacts(spec, robot, physics)
+    servo.add_servos(spec, robot)
+    world.add_scene(spec, physics, extras)
+    try:
+        model = spec.compile()
+    except ValueError as exc:  # e.g. an inertia MuJoCo rejects; the message names the body
+        raise URDFError(
+            f"MuJoCo cannot compile {robot.urdf_path}: {' '.join(str(exc).split())}; fix the element it names"
+        ) from None
+    names = robot.joint_names
+    qpos = _index([int(model.jnt_qposadr[model.joint(n).id]) for n in names])
+    qvel = _index([int(model.jnt_dofadr[model.joint(n).id]) for n in names])
+    actuators = _index([int(model.actuator(n).id) for n in names])
+    servo.set_gains(model, qpos, qvel, actuators, robot.home)
+
+    bodies = {model.body(i).name: i for i in range(model.nbody)}
+    mocap = {m.name: int(model.body_mocapid[bodies[world.MARKER_PREFIX + m.name]]) for m in extras.markers}
+    free = {}
+    for box in extras.boxes:
+        if box.mass > 0:
+            joint = model.joint(world.BODY_PREFIX + box.name).id
+            free[box.name] = (int(model.jnt_qposadr[joint]), int(model.jnt_dofadr[joint]))
+    return CompiledModel(
+        model=model,
+        qpos=qpos,
+        qvel=qvel,
+        actuators=actuators,
+        bodies=MappingProxyType(bodies),
+        mocap=MappingProxyType(mocap),
+        free=MappingProxyType(free),
+    )
+
+
+def compiled_model(robot: RobotModel, physics: PhysicsConfig, extras: Extras | None = None) -> CompiledModel:
+    """The compiled model for ``robot``, cached per (URDF file, mtime, content, home, joints, physics, extras).
+
+    The gains and other constants of this package are not part of the key: after changing
+    one (when tuning), call :func:`clear_cache`.
+    """
+    extras = extras or Extras()
+    try:
+        mtime = robot.urdf_path.stat().st_mtime_ns
+    except OSError:
+        mtime = -1
+    key = (
+        str(robot.urdf_path),
+        mtime,
+        hashlib.sha1(robot.parsed.resolved_xml).hexdigest(),
+        tuple(robot.home.tolist()),
+        robot.joint_names,
+        physics,
+        extras,
+    )
+    with _cache_lock:
+        hit = _cache.get(key)
+        if hit is not None:
+            _cache.move_to_end(key)
+            return hit
+    compiled = build(robot, physics, extras)
+    with _cache_lock:
+        _cache[key] = compiled
+        while len(_cache) > MODEL_CACHE_SIZE:
+            _cache.popitem(last=False)
+    return compiled
+
+
+def clear_cache() -> None:
+    """Forget every compiled model (for tests, and after changing a gain when tuning)."""
+    with _cache_lock:
+        _cache.clear()

@@ -1,0 +1,32 @@
+"""Diagnostics of the MuJoCo backend for ``armreach bench``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from armreach_core.backend import Backend
+from armreach_core.robot import FloatArray
+from armreach_core.specs import BackendProbes
+from armreach_mujoco.backend import MuJoCoBackend
+from armreach_mujoco.engine import mujoco
+
+
+def bare_loop(backend: Backend, deltas: FloatArray) -> None:
+    """The engine work of ``len(deltas)`` env steps, written directly against MuJoCo."""
+    assert isinstance(backend, MuJoCoBackend)
+    compiled, substeps = backend.compiled, backend.physics.substeps
+    model, data = compiled.model, backend.data
+    lower, upper = backend.robot.lower, backend.robot.upper
+    act, qpos_index, qvel_index = compiled.actuators, compiled.qpos, compiled.qvel
+    ee = compiled.bodies[backend.robot.ee_link]
+    q = data.qpos[qpos_index]  # indexing with an array copies
+    for delta in deltas:
+        data.ctrl[act] = np.minimum(np.maximum(q + delta, lower), upper)
+        mujoco.mj_step(model, data, nstep=substeps)
+        mujoco.mj_kinematics(model, data)
+        q = data.qpos[qpos_index]
+        _qd = data.qvel[qvel_index]
+        _ee = data.xpos[ee].copy()
+
+
+PROBES = BackendProbes(bare_loop=bare_loop)

@@ -1,0 +1,130 @@
+"""URDF → ``mujoco.MjSpec`` with MuJoCo's own URDF importer; every URDF link stays a body.
+
+The resolved URDF (mesh paths already absolute) gets a ``<mujoco><compiler/></mujoco>``
+block (``strippath=false``, ``discardvisual=false``, ``fusestatic=false``, so every link,
+``tool0`` included, is a body whose frame is the link frame). Meshes MuJoCo cannot read
+(``.dae``, ``.ply``...) are converted once to ``.obj`` with trimesh into a cache folder.
+Links that move but have no ``<inertial>`` get PyBullet's default inertial (see
+:func:`spec_from_urdf`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+from typing import Any
+
+from lxml import etree
+
+from armreach_core.errors import URDFError
+from armreach_core.robot import RobotModel
+from armreach_mujoco.engine import mujoco
+
+#: Mesh formats MuJoCo reads itself; others are converted to .obj with trimesh.
+NATIVE_MESHES = (".stl", ".obj", ".msh")
+
+
+def mesh_cache_dir() -> Path:
+    """Where converted meshes are kept (``$XDG_CACHE_HOME/armreach/mujoco-meshes``)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "armreach" / "mujoco-meshes"
+
+
+def convert_mesh(path: Path) -> Path:
+    """A copy of ``path`` MuJoCo can read (.obj), converted once with trimesh and cached."""
+    stat = path.stat()
+    digest = hashlib.sha1(f"{path}:{stat.st_mtime_ns}:{stat.st_size}".encode()).hexdigest()[:16]
+    out = mesh_cache_dir() / f"{path.stem}-{digest}.obj"
+    if out.is_file():
+        return out
+    import trimesh
+    from trimesh.exchange.obj import export_obj
+
+    fix = "fix the file, or convert it to .stl or .obj and point the URDF at that"
+    try:
+        mesh = trimesh.load(str(path), force="mesh")
+    except Exception as exc:
+        detail = str(exc) if type(exc).__name__ in str(exc) else f"{type(exc).__name__}: {exc}"
+        raise URDFError(
+            f"MuJoCo cannot read mesh {str(path)!r} and trimesh could not convert it ({detail}); {fix}"
+        ) from exc
+    vertices, faces = len(getattr(mesh, "vertices", ())), len(getattr(mesh, "faces", ()))
+    if faces == 0 or vertices < 4:  # MuJoCo rejects it, naming only the converted copy
+        raise URDFError(
+            f"mesh {str(path)!r} has {vertices} vertices and {faces} triangles once read by trimesh, "
+            f"and MuJoCo needs at least 4 vertices and a triangle; {fix}"
+        )
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(f".{os.getpid()}.tmp.obj")
+    # Geometry only: a material file would be shared by every converted mesh in the folder.
+    text: str = export_obj(mesh, include_texture=False, write_texture=False)  # type: ignore[no-untyped-call]
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, out)
+    return out
+
+
+def urdf_for_mujoco(robot: RobotModel) -> str:
+    """The robot's resolved URDF with readable mesh paths and MuJoCo's compiler block."""
+    root = etree.fromstring(robot.parsed.resolved_xml)
+    for mesh in root.iter("mesh"):
+        filename = Path(mesh.get("filename", ""))
+        if filename.suffix.lower() not in NATIVE_MESHES:
+            mesh.set("filename", str(convert_mesh(filename)))
+    for old in root.findall("mujoco"):
+        root.remove(old)
+    block = etree.SubElement(root, "mujoco")
+    etree.SubElement(
+        block,
+        "compiler",
+        balanceinertia="true",
+        strippath="false",
+        discardvisual="false",
+        fusestatic="false",
+        angle="radian",
+    )
+    return etree.tostring(root, encoding="unicode")
+
+
+def links_without_inertial(robot: RobotModel) -> list[str]:
+    """Links with no ``<inertial>`` that move (a movable joint lies between them and the root)."""
+    urdf = robot.parsed.model.robot
+    parent_joint = {str(j.child): j for j in urdf.joints}
+    moving: list[str] = []
+    for link in urdf.links:
+        if link.inertial is not None:
+            continue
+        name = str(link.name)
+        while name in parent_joint:
+            joint = parent_joint[name]
+            if str(joint.type) != "fixed":
+                moving.append(str(link.name))
+                break
+            name = str(joint.parent)
+    return moving
+
+
+def spec_from_urdf(robot: RobotModel) -> Any:
+    """An ``MjSpec`` of the robot alone, as MuJoCo imports it, with PyBullet's missing inertials.
+
+    PyBullet's URDF reader gives a moving link without ``<inertial>`` (a bare ``tool0``)
+    1 kg and 1 kg m² on each axis (with a warning), which adds ~1 kg m² to the inertia
+    of every joint before it; MuJoCo would make it massless, and light wrists would then
+    move ~50x faster than in PyBullet. Links welded to the root keep MuJoCo's reading.
+    """
+    try:
+        spec = mujoco.MjSpec.from_string(urdf_for_mujoco(robot))
+    except ValueError as exc:  # MuJoCo's URDF importer refused the file
+        raise URDFError(
+            f"MuJoCo cannot read {robot.urdf_path}: {' '.join(str(exc).split())}; fix the element it names"
+        ) from None
+    spec.modelname = robot.name
+    for link in links_without_inertial(robot):
+        body = spec.body(link)
+        if body is not None:
+            body.explicitinertial = True
+            body.mass = 1.0
+            body.inertia = [1.0, 1.0, 1.0]
+            body.ipos = [0.0, 0.0, 0.0]
+            body.iquat = [1.0, 0.0, 0.0, 0.0]
+    return spec

@@ -1,0 +1,162 @@
+"""The world around the arm in the ``MjSpec``: physics options, contacts, ground, markers, boxes, friction.
+
+Contacts
+    With ``self_collision`` off, the arm's collision geoms collide with the ground and with
+    added boxes only (contype/conaffinity bits); boxes collide with the arm, the ground and
+    each other. With it on, the arm's links also collide with each other, except across
+    each URDF joint (PyBullet's ``URDF_USE_SELF_COLLISION_EXCLUDE_PARENT``); this explicit
+    exclusion also covers the base, which is welded to the world and so escapes MuJoCo's
+    own parent-child filter.
+
+    MuJoCo's contacts are soft where PyBullet's are rigid, so once a box is added the model
+    gets the noslip solver and the boxes' contacts the stiffest safe time constant; a
+    gripped cube then does not slide, but still sinks a few mm in the grip. The
+    measurements and what else was tried are in ``docs/mujoco-backend.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from armreach_core.backend import PhysicsConfig
+from armreach_core.robot import RobotModel
+from armreach_mujoco.engine import mujoco
+
+RGBA = tuple[float, float, float, float]
+Vec3 = tuple[float, float, float]
+
+GROUND_RGBA = (0.86, 0.87, 0.89, 1.0)
+#: Collision bits: the arm is type 2 and collides with type 1 (the ground), and with type 2
+#: too when self-collision is on. Added boxes are type 4 and collide with all three.
+ARM_CONTYPE, GROUND_CONTYPE, BODY_CONTYPE = 2, 1, 4
+#: MuJoCo names of what this package adds, so they cannot clash with the URDF's links.
+BODY_PREFIX = "armreach_body_"
+MARKER_PREFIX = "armreach_marker_"
+#: Contact settings once boxes are added: noslip solver iterations, and the contact time
+#: constant of boxes in physics steps (MuJoCo's stiffest safe value is 2) with a solmix
+#: weight that makes it win against the arm's.
+NOSLIP_ITERATIONS = 10
+BODY_SOLREF_STEPS = 2.0
+BODY_SOLMIX = 100.0
+
+
+@dataclass(frozen=True)
+class Marker:
+    name: str
+    radius: float
+    rgba: RGBA
+
+
+@dataclass(frozen=True)
+class Box:
+    name: str
+    half_extents: Vec3
+    mass: float
+    friction: float
+    rgba: RGBA
+    position: Vec3
+
+
+@dataclass(frozen=True)
+class Extras:
+    """What tasks added to the world: markers, boxes and friction coefficients of robot links.
+
+    Part of the compiled-model cache key: envs that added the same things share a model.
+    """
+
+    markers: tuple[Marker, ...] = ()
+    boxes: tuple[Box, ...] = ()
+    frictions: tuple[tuple[str, float], ...] = ()
+
+
+def set_options(spec: Any, physics: PhysicsConfig) -> None:
+    """Timestep, gravity, the ``implicitfast`` integrator, inertia bounds, headlight."""
+    spec.option.timestep = physics.timestep
+    spec.option.gravity = list(physics.gravity)
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.compiler.boundmass = 1e-6
+    spec.compiler.boundinertia = 1e-10
+    if not physics.inertia_from_file:
+        spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_TRUE
+        spec.compiler.inertiagrouprange = [0, 0]
+    spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
+    spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
+
+
+def set_arm_contacts(spec: Any, robot: RobotModel, physics: PhysicsConfig) -> None:
+    """Collision bits of the arm's geoms and, with self-collision, the exclusions across joints.
+
+    Call before anything else is added to the spec: every geom it holds is taken for the arm's.
+    """
+    arm_affinity = GROUND_CONTYPE | (ARM_CONTYPE if physics.self_collision else 0)
+    for geom in spec.geoms:
+        if geom.contype or geom.conaffinity:
+            geom.contype, geom.conaffinity = ARM_CONTYPE, arm_affinity
+    if physics.self_collision:
+        body_names = {body.name for body in spec.bodies}
+        for joint in robot.parsed.model.robot.joints:
+            parent, child = str(joint.parent), str(joint.child)
+            if parent in body_names and child in body_names and "world" not in (parent, child):
+                spec.add_exclude(bodyname1=parent, bodyname2=child)
+
+
+def add_scene(spec: Any, physics: PhysicsConfig, extras: Extras) -> None:
+    """A white sky like PyBullet's, a light, the ground, markers, boxes and link frictions.
+
+    Call after the servos are added: the boxes must not get the arm's gravity compensation.
+    """
+    spec.add_texture(
+        name="armreach_sky",
+        type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
+        builtin=mujoco.mjtBuiltin.mjBUILTIN_FLAT,
+        rgb1=[1.0, 1.0, 1.0],
+        rgb2=[1.0, 1.0, 1.0],
+        width=16,
+        height=16,
+    )
+    world = spec.worldbody
+    world.add_light(pos=[0.0, -0.5, 3.0], dir=[0.0, 0.2, -1.0], diffuse=[0.5, 0.5, 0.5], castshadow=False)
+    if physics.ground:
+        world.add_geom(
+            name="armreach_ground",
+            type=mujoco.mjtGeom.mjGEOM_PLANE,
+            size=[1.5, 1.5, 0.01],
+            rgba=list(GROUND_RGBA),
+            contype=GROUND_CONTYPE,
+            conaffinity=ARM_CONTYPE,
+            group=2,
+        )
+    for marker in extras.markers:  # mocap bodies with a visual-only sphere
+        body = world.add_body(name=MARKER_PREFIX + marker.name, mocap=True)
+        body.add_geom(
+            type=mujoco.mjtGeom.mjGEOM_SPHERE,
+            size=[marker.radius, 0.0, 0.0],
+            rgba=list(marker.rgba),
+            contype=0,
+            conaffinity=0,
+            group=2,
+            mass=0.0,
+        )
+
+    if extras.boxes:
+        spec.option.noslip_iterations = NOSLIP_ITERATIONS
+    for box in extras.boxes:
+        body = world.add_body(name=BODY_PREFIX + box.name, pos=list(box.position))
+        if box.mass > 0:
+            body.add_freejoint(name=BODY_PREFIX + box.name)
+        body.add_geom(
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=list(box.half_extents),
+            rgba=list(box.rgba),
+            friction=[box.friction, 0.005, 0.0001],
+            contype=BODY_CONTYPE,
+            conaffinity=GROUND_CONTYPE | ARM_CONTYPE | BODY_CONTYPE,
+            group=2,
+            solref=[BODY_SOLREF_STEPS * physics.timestep, 1.0],
+            solmix=BODY_SOLMIX,
+            **({"mass": box.mass} if box.mass > 0 else {}),
+        )
+    for link, friction in extras.frictions:
+        for geom in spec.body(link).geoms:
+            geom.friction = [friction, *list(geom.friction)[1:]]

@@ -1,0 +1,9 @@
+"""The MuJoCo backend keeps the contract every backend keeps (armreach_core.testing)."""
+
+from __future__ import annotations
+
+from armreach_core.testing import BackendContract
+
+
+class TestMuJoCoContract(BackendContract):
+    backend = "mujoco"

@@ -1,0 +1,41 @@
+"""Diagnostics of the PyBullet backend for ``armreach bench`` and ``armreach soak``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pybullet as pb
+
+from armreach_core.backend import Backend
+from armreach_core.robot import FloatArray
+from armreach_core.specs import BackendProbes
+from armreach_pybullet.backend import MAX_CLIENTS, PyBulletBackend
+
+
+def live_clients() -> int:
+    """Connected PyBullet clients in this process (every backend holds one until closed)."""
+    return sum(1 for client in range(MAX_CLIENTS) if pb.isConnected(physicsClientId=client))
+
+
+def bare_loop(backend: Backend, deltas: FloatArray) -> None:
+    """The engine work of ``len(deltas)`` env steps, written directly against PyBullet."""
+    assert isinstance(backend, PyBulletBackend)
+    cid, body, joints, substeps = backend.client, backend.body, backend.joint_indices, backend.physics.substeps
+    lower, upper = backend.robot.lower, backend.robot.upper
+    ee = backend.link_index(backend.robot.ee_link)
+    forces, kp, kd, control = backend.motor_forces, backend.position_gains, backend.velocity_gains, pb.POSITION_CONTROL
+    q = np.array([s[0] for s in pb.getJointStates(body, joints, physicsClientId=cid)])
+    for delta in deltas:
+        target = np.minimum(np.maximum(q + delta, lower), upper)
+        pb.setJointMotorControlArray(
+            body, joints, control, targetPositions=target.tolist(), forces=forces,
+            positionGains=kp, velocityGains=kd, physicsClientId=cid,
+        )  # fmt: skip
+        for _ in range(substeps):
+            pb.stepSimulation(physicsClientId=cid)
+        states = pb.getJointStates(body, joints, physicsClientId=cid)
+        q = np.array([s[0] for s in states])
+        _qd = [s[1] for s in states]
+        _ee = pb.getLinkState(body, ee, computeForwardKinematics=True, physicsClientId=cid)[4]
+
+
+PROBES = BackendProbes(bare_loop=bare_loop, live_clients=live_clients)
