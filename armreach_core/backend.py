@@ -105,7 +105,9 @@ NO_OBJECTS: Mapping[str, BodyState] = MappingProxyType({})
 
 @dataclass(frozen=True)
 class ArmState:
-    """What the core reads from a backend after each step (base frame, SI units).
+    """What the core reads from a backend after each step (world frame, SI units).
+
+    With the default base placement the world frame and the robot's base frame coincide.
 
     ``objects`` holds the state of every free body in the world, by name (empty for reach).
     """

@@ -58,6 +58,10 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             default the registered robot's (none for a ``urdf``).
         allow_external_meshes: let ``urdf`` use meshes outside its folder or ROS package
             (default: the ``ARMREACH_ALLOW_EXTERNAL_MESHES`` environment variable, else no).
+        base_position: where the robot's root link sits in the world, ``(x, y, z)`` in m;
+            default the origin. Positions in observations are in the world frame.
+        base_orientation: the root link's orientation, a quaternion ``(w, x, y, z)``
+            (normalized); default no rotation.
         **task_options: passed to the task.
     """
 
@@ -83,6 +87,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         camera: Camera | None = None,
         tool_joints: tuple[str, ...] | list[str] | None = None,
         allow_external_meshes: bool | None = None,
+        base_position: npt.ArrayLike | None = None,
+        base_orientation: npt.ArrayLike | None = None,
         **task_options: Any,
     ) -> None:
         spec = task_spec(task)
@@ -108,13 +114,21 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
                 home if home is not None else rspec.home,
                 tuple(tool_joints) if tool_joints is not None else rspec.tool_joints,
                 allow_external_meshes=allow_external_meshes,
+                base_position=base_position,
+                base_orientation=base_orientation,
             )
             for key, value in rspec.task_defaults.get(task, {}).items():
                 task_options.setdefault(key, value)  # the robot's defaults for this task; the user's win
         else:
             assert urdf is not None
             self.robot = load_robot(
-                urdf, ee_link, home, tuple(tool_joints or ()), allow_external_meshes=allow_external_meshes
+                urdf,
+                ee_link,
+                home,
+                tuple(tool_joints or ()),
+                allow_external_meshes=allow_external_meshes,
+                base_position=base_position,
+                base_orientation=base_orientation,
             )
 
         self.task_name = task

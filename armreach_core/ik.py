@@ -39,19 +39,77 @@ def solve(
     return q, float(np.linalg.norm(goal - robot.forward_kinematics(q)))
 
 
+def solve_with_restarts(
+    robot: RobotModel,
+    target: npt.ArrayLike,
+    q0: npt.ArrayLike,
+    restarts: int = 16,
+    tolerance: float = 1e-4,
+    seed: int = 0,
+) -> tuple[FloatArray, float]:
+    """:func:`solve` from ``q0``, then from home, then from ``restarts`` random configurations.
+
+    Returns the first solution within ``tolerance`` (so the nearest start that works wins),
+    else the best one found. The random starts are seeded: the result is deterministic.
+    """
+    rng = np.random.default_rng(seed)
+    starts = [np.asarray(q0, dtype=np.float64), robot.home]
+    best_q, best_d = robot.home, float("inf")
+    for i in range(restarts + 2):
+        start = starts[i] if i < len(starts) else robot.sample_configurations(rng, 1)[0]
+        if i >= len(starts):
+            start[robot.arm_dof :] = robot.home[robot.arm_dof :]  # off-arm joints keep their home
+        q, distance = solve(robot, target, q0=start, tolerance=tolerance)
+        if distance < best_d:
+            best_q, best_d = q, distance
+        if distance < tolerance:
+            break
+    return best_q, best_d
+
+
 class IKPolicy:
     """A controller that maps the reach env's state to actions with one DLS step per control step.
 
     It reads joint angles and the target from the flat (or goal-conditioned) observation
     and scales the joint change into the env's [-1, 1] action range.
+
+    With ``restarts`` > 0 it first plans: when the target changes it solves the inverse
+    kinematics (from the current angles, then from home and ``restarts`` seeded random
+    configurations, :func:`solve_with_restarts`) and moves all joints together in joint
+    space towards that solution, switching to damped least squares within ``near`` metres of
+    the target. This reaches targets where the plain closed loop stops in a local minimum
+    or at a joint limit.
     """
 
-    def __init__(self, robot: RobotModel, max_joint_step: float, damping: float = 0.05, gain: float = 1.0) -> None:
+    def __init__(
+        self,
+        robot: RobotModel,
+        max_joint_step: float,
+        damping: float = 0.05,
+        gain: float = 1.0,
+        *,
+        restarts: int = 0,
+        near: float = 0.02,
+    ) -> None:
         self.robot = robot
         self.max_joint_step = max_joint_step
         self.damping = damping
         self.gain = gain
+        self.restarts = restarts
+        self.near = near
+        self._target: FloatArray | None = None
+        self._goal: FloatArray | None = None
 
     def act(self, q: npt.ArrayLike, target: npt.ArrayLike) -> npt.NDArray[np.float32]:
-        dq = self.gain * dls_step(self.robot, q, target, self.damping)
+        q_arr, goal = np.asarray(q, dtype=np.float64), np.asarray(target, dtype=np.float64)
+        if self.restarts > 0:
+            if self._target is None or not np.array_equal(goal, self._target):
+                self._target = goal.copy()
+                self._goal, _ = solve_with_restarts(self.robot, goal, q_arr, restarts=self.restarts)
+            far = float(np.linalg.norm(goal - self.robot.forward_kinematics(q_arr))) > self.near
+            if self._goal is not None and far:
+                dq = self._goal - q_arr
+                scale = max(1.0, float(np.max(np.abs(dq))) / self.max_joint_step)
+                return np.clip(dq / (scale * self.max_joint_step), -1.0, 1.0).astype(np.float32)
+        dq = self.gain * dls_step(self.robot, q_arr, goal, self.damping)
         return np.clip(dq / self.max_joint_step, -1.0, 1.0).astype(np.float32)

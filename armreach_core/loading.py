@@ -18,7 +18,7 @@ import numpy.typing as npt
 from armreach_core.backend import Backend
 from armreach_core.errors import BackendUnavailableError, ConfigError
 from armreach_core.plugins import PluginHost, get_host
-from armreach_core.robot import RobotModel
+from armreach_core.robot import RobotModel, base_pose
 from armreach_core.specs import BackendProbes, BackendSpec, RobotSpec, TaskSpec
 from armreach_core.urdf import allow_external_meshes_default
 
@@ -109,8 +109,18 @@ def _robot(
     home: tuple[float, ...] | None,
     tool_joints: tuple[str, ...],
     external: bool,
+    position: tuple[float, float, float] | None,
+    orientation: tuple[float, float, float, float],
 ) -> RobotModel:
-    return RobotModel(path, ee_link=ee_link, home=home, tool_joints=tool_joints, allow_external_meshes=external)
+    return RobotModel(
+        path,
+        ee_link=ee_link,
+        home=home,
+        tool_joints=tool_joints,
+        allow_external_meshes=external,
+        base_position=position,
+        base_orientation=orientation,
+    )
 
 
 def load_robot(
@@ -120,8 +130,17 @@ def load_robot(
     tool_joints: tuple[str, ...] = (),
     *,
     allow_external_meshes: bool | None = None,
+    base_position: npt.ArrayLike | None = None,
+    base_orientation: npt.ArrayLike | None = None,
 ) -> RobotModel:
-    """A :class:`RobotModel`, cached per (file, modification time, ee_link, home, tool_joints, mesh rule)."""
+    """A :class:`RobotModel`, cached per (file, modification time, ee_link, home, tool_joints, mesh rule, base pose).
+
+    Raises:
+        ConfigError: a base placement that is not three finite numbers and a non-zero quaternion.
+    """
+    base = base_pose(base_position, base_orientation)  # checked and normalized: the cache key
+    # No base position given: the robot may raise its base itself (see RobotModel), so say so.
+    position = None if base_position is None else base[0]
     path = Path(urdf).expanduser()
     try:
         mtime = path.stat().st_mtime if path.is_file() else -1.0
@@ -131,5 +150,13 @@ def load_robot(
     tools = tuple(str(name) for name in tool_joints)
     external = allow_external_meshes_default() if allow_external_meshes is None else bool(allow_external_meshes)
     if mtime < 0:  # raises the URDFError
-        return RobotModel(path, ee_link=ee_link, home=home, tool_joints=tools, allow_external_meshes=external)
-    return _robot(str(path.resolve()), mtime, ee_link, home_key, tools, external)
+        return RobotModel(
+            path,
+            ee_link=ee_link,
+            home=home,
+            tool_joints=tools,
+            allow_external_meshes=external,
+            base_position=position,
+            base_orientation=base[1],
+        )
+    return _robot(str(path.resolve()), mtime, ee_link, home_key, tools, external, position, base[1])

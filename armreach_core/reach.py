@@ -50,8 +50,8 @@ class ReachTask(Task):
         distance_exponent: ``p`` in the distance term ``-d^p``, default 3 (the paper's);
             1 gives a steeper signal near the target for training.
         target_radius: radius of the target ball (m), default 0.5.
-        target_center: centre of the ball (m, base frame); default from the robot's
-            registration, else ``(0.5 R, 0, 0.5 R)`` with ``R`` the arm's reach (or, for an
+        target_center: centre of the ball (m, world frame); default from the robot's
+            registration, else ``(0.5 R, 0, 0.5 R)`` from the base, with ``R`` the arm's reach (or, for an
             arm that reaches no point of that ball, the reachable point nearest to it).
         min_target_height: lowest target height (m), default 0.05.
         goal_conditioned: return a Dict observation (observation / achieved_goal /
@@ -85,7 +85,8 @@ class ReachTask(Task):
         self.goal_conditioned = bool(goal_conditioned)
         if target_center is None:
             reach = reachability_map(robot).reach
-            self.sampler = TargetSampler(robot, (0.5 * reach, 0.0, 0.5 * reach), target_radius, min_target_height)
+            front = np.asarray(robot.base_position) + (0.5 * reach, 0.0, 0.5 * reach)
+            self.sampler = TargetSampler(robot, front, target_radius, min_target_height)
             if not self.sampler.has_targets():  # an odd arm: centre the ball on a point it reaches
                 center = self.sampler.nearest_reachable(self.sampler.center)
                 if center is None:
@@ -112,7 +113,7 @@ class ReachTask(Task):
 
     @property
     def target(self) -> FloatArray:
-        """The episode's target (m, base frame)."""
+        """The episode's target (m, world frame)."""
         return self._target
 
     @target.setter
@@ -125,14 +126,15 @@ class ReachTask(Task):
     # -- spaces ------------------------------------------------------------------------
     def _components(self, reach: float) -> list[Component]:
         robot, n = self.robot, self.robot.dof
+        base = np.asarray(self.robot.base_position)
         box = np.full(3, reach + 0.1)
         ball_low = self.sampler.center - self.sampler.radius
         ball_high = self.sampler.center + self.sampler.radius
         span = np.full(3, 2 * reach + 2 * self.sampler.radius + 0.2)
         vel = 2.0 * robot.velocity_limits
         joint = Component(JOINTS, n, "rad", robot.lower, robot.upper, "θ, inside the joint limits")
-        ee = Component(EE, 3, "m", -box, box, "p_e, base frame, from the engine")
-        target = Component(TARGET, 3, "m", ball_low, ball_high, "p_t, base frame")
+        ee = Component(EE, 3, "m", base - box, base + box, "p_e, world frame, from the engine")
+        target = Component(TARGET, 3, "m", ball_low, ball_high, "p_t, world frame")
         qd = Component(VELOCITIES, n, "rad/s", -vel, vel, "θ̇, bounded by twice the URDF limits")
         delta = Component(DELTA, 3, "m", -span, span, "p_t − p_e")
         if self.goal_conditioned:
@@ -143,13 +145,14 @@ class ReachTask(Task):
         flat = self.layout.box()
         if not self.goal_conditioned:
             return flat
+        base = np.asarray(self.robot.base_position, dtype=np.float32)
         reach = np.full(3, self.sampler.map.reach + 0.1, dtype=np.float32)
         low = (self.sampler.center - self.sampler.radius).astype(np.float32)
         high = (self.sampler.center + self.sampler.radius).astype(np.float32)
         return spaces.Dict(
             {
                 "observation": flat,
-                "achieved_goal": spaces.Box(-reach, reach, dtype=np.float32),
+                "achieved_goal": spaces.Box(base - reach, base + reach, dtype=np.float32),
                 "desired_goal": spaces.Box(low, high, dtype=np.float32),
             }
         )

@@ -34,8 +34,8 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     | index | component | unit | low | high | notes |
     |---|---|---|---|---|---|
     | 0–5 | joint angles | rad | [-6.28, -6.28, -3.14, -6.28, -6.28, -6.28] | [6.28, 6.28, 3.14, 6.28, 6.28, 6.28] | θ, inside the joint limits |
-    | 6–8 | end-effector position | m | [-1.14, -1.14, -1.14] | [1.14, 1.14, 1.14] | p_e, base frame, from the engine |
-    | 9–11 | target position | m | [-0.05, -0.5 , -0.05] | [0.95, 0.5 , 0.95] | p_t, base frame |
+    | 6–8 | end-effector position | m | [-1.14, -1.14, -1.14] | [1.14, 1.14, 1.14] | p_e, world frame, from the engine |
+    | 9–11 | target position | m | [-0.05, -0.5 , -0.05] | [0.95, 0.5 , 0.95] | p_t, world frame |
     | 12–17 | joint velocities | rad/s | [-6.3, -6.3, -6.3, -6.4, -6.4, -6.4] | [6.3, 6.3, 6.3, 6.4, 6.4, 6.4] | θ̇, bounded by twice the URDF limits |
     | 18–20 | end effector to target | m | [-3.27, -3.27, -3.27] | [3.27, 3.27, 3.27] | p_t − p_e |
 
@@ -51,7 +51,9 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
 
     ## Starting state
 
-    The robot's home configuration (ar6: (0, −π/2, π/2, −π/2, −π/2, 0) rad) with zero velocity. The target is
+    The robot's home configuration with zero velocity (ar6: (0, −π/2, π/2, −π/2, −π/2, 0) rad;
+    another URDF: chosen from the URDF, clear of the ground, see ``armreach_core.home``; joints
+    off the arm's chain are reset to their hold positions). The target is
     uniform in a ball of radius ``target_radius`` (0.5 m) centred at ``target_center``
     (ar6: (0.45, 0, 0.45) m), keeping only points at least ``min_target_height`` (0.05 m) above
     the ground and inside the arm's reachable set computed from the URDF. All

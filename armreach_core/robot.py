@@ -4,10 +4,17 @@
 built from a URDF alone (through :mod:`armreach_core.urdf`, i.e. yourdfpy) and needs no
 physics engine; its :meth:`RobotModel.forward_kinematics` is the oracle the parity
 tests hold both engines against.
+
+The arm is the chain of joints from the root link to the end effector (by default the one
+:mod:`armreach_core.anatomy` finds: never a finger). Movable joints off that chain, such as
+a gripper's fingers, are *held* (:attr:`RobotModel.held_joints`): every backend resets them
+to a fixed position at every reset and holds them there, or, for ``<mimic>`` joints, makes
+them follow their master.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 from dataclasses import dataclass
@@ -17,13 +24,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.errors import URDFError
+from armreach_core.anatomy import MOVABLE_TYPES, Tree, default_end_effector
+from armreach_core.errors import ConfigError, URDFError
 from armreach_core.urdf import ParsedURDF, read_urdf
 
 FloatArray = npt.NDArray[np.float64]
 
-#: Joint types that armreach actuates.
-MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
+log = logging.getLogger("armreach.robot")
+
+__all__ = ["MOVABLE_TYPES", "HeldJoint", "JointSpec", "Mimic", "RobotModel", "base_pose"]
 #: Range used for ``continuous`` joints, which the URDF leaves unlimited (rad).
 CONTINUOUS_RANGE = 2.0 * math.pi
 #: Velocity assumed where a URDF gives none (rad/s or m/s).
@@ -45,6 +54,92 @@ class JointSpec:
     velocity: float
     effort: float
     damping: float
+
+
+@dataclass(frozen=True)
+class Mimic:
+    """A ``<mimic>``: the joint follows ``multiplier * position(joint) + offset``.
+
+    ``joint`` is the master at the end of any chain of mimics, with the factors composed.
+    """
+
+    joint: str
+    multiplier: float
+    offset: float
+
+
+@dataclass(frozen=True)
+class HeldJoint:
+    """A movable joint the arm does not actuate (a finger, say): reset and held at ``position``.
+
+    Attributes:
+        name, type: the URDF joint.
+        position: where it is held (rad or m): the URDF's zero moved inside the limits or,
+            for a mimic joint, ``multiplier * master + offset`` (moved inside its limits)
+            with the master at its own hold position (an actuated master: at its zero
+            inside its limits; :meth:`RobotModel.held_positions` follows the actual pose).
+        effort: the most force a backend's motor may use to hold it (N·m or N).
+        mimic: the master it follows, if the URDF says so; backends make it track the
+            master's position (:meth:`RobotModel.held_positions`).
+    """
+
+    name: str
+    type: str
+    position: float
+    effort: float
+    mimic: Mimic | None = None
+
+
+def base_pose(
+    position: npt.ArrayLike | None = None, orientation: npt.ArrayLike | None = None
+) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+    """A checked base placement: ``(x, y, z)`` in m and a unit quaternion ``(w, x, y, z)``.
+
+    ``None`` means the origin, or no rotation. The quaternion is normalized.
+
+    Raises:
+        ConfigError: not three finite numbers, or not four finite numbers that are not all zero.
+    """
+    pos = _numbers(position, 3, "base_position", "three finite numbers (x, y, z) in metres, such as (0, 0, 0.5)")
+    quat = _numbers(
+        orientation, 4, "base_orientation", "a quaternion of four finite numbers (w, x, y, z), such as (1, 0, 0, 0)"
+    )
+    if pos is None:
+        pos = np.zeros(3)
+    if quat is None:
+        quat = np.array([1.0, 0.0, 0.0, 0.0])
+    norm = float(np.linalg.norm(quat))
+    if not norm > 1e-9:
+        raise ConfigError(
+            f"base_orientation={orientation!r} is all zero; give a quaternion (w, x, y, z), e.g. (1, 0, 0, 0)"
+        )
+    w, x, y, z = (float(v) for v in quat / norm)
+    return (float(pos[0]), float(pos[1]), float(pos[2])), (w, x, y, z)
+
+
+def _numbers(value: npt.ArrayLike | None, size: int, what: str, expected: str) -> FloatArray | None:
+    if value is None:
+        return None
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{what}={value!r} must be {expected}") from None
+    if array.shape != (size,) or not np.all(np.isfinite(array)):
+        raise ConfigError(f"{what}={value!r} must be {expected}")
+    return array
+
+
+def pose_matrix(position: tuple[float, float, float], orientation: tuple[float, float, float, float]) -> FloatArray:
+    """The 4x4 transform of a position and a unit quaternion ``(w, x, y, z)``."""
+    w, x, y, z = orientation
+    transform = np.eye(4)
+    transform[:3, :3] = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ]
+    transform[:3, 3] = position
+    return transform
 
 
 @dataclass(frozen=True)
@@ -70,17 +165,34 @@ class RobotModel:
 
     Args:
         urdf: path to the URDF file.
-        ee_link: the end-effector link; by default the tip of the serial chain.
-        home: initial joint configuration (rad); by default zero, moved inside the limits.
+        ee_link: the end-effector link; by default a tool centre the URDF names at the end
+            of the arm, else the link the gripper hangs from, else the chain's tip (see
+            :mod:`armreach_core.anatomy`; the choice and its reason are logged to
+            ``armreach.robot``).
+        home: initial joint configuration (rad); by default one chosen from the URDF
+            (:mod:`armreach_core.home`).
         tool_joints: movable joints off the chain to the end effector that are actuated
             too (a gripper's fingers), in this order after the chain's joints. They have
             no effect on :meth:`forward_kinematics`; their Jacobian columns are zero.
-            Default none: only the chain is actuated.
+            Default none: only the chain is actuated. A mimic joint cannot be one (it
+            follows its master: actuate the master).
         allow_external_meshes: accept meshes outside the URDF's folder or package (see
             :func:`armreach_core.urdf.read_urdf`; default: ``ARMREACH_ALLOW_EXTERNAL_MESHES``).
+        base_position: where the root link sits in the world (m); default the origin.
+        base_orientation: the root link's orientation, a quaternion ``(w, x, y, z)``
+            (normalized here); default no rotation. Kinematics are in the world frame.
+
+    Attributes:
+        joint_names: the actuated joints: the arm's chain, then ``tool_joints``.
+        held_joints: every other movable joint (:class:`HeldJoint`), in URDF order.
+        gripper_joints: the movable joints below the link the gripper hangs from, as the
+            default end-effector analysis found them (empty without a gripper, or when
+            ``ee_link`` was given and the tree alone is ambiguous).
+        base_position, base_orientation, base_transform: the base placement.
 
     Raises:
         URDFError: the file cannot be used, with the reason and the fix.
+        ConfigError: a bad ``home`` or base placement.
     """
 
     def __init__(
@@ -91,7 +203,16 @@ class RobotModel:
         tool_joints: tuple[str, ...] = (),
         *,
         allow_external_meshes: bool | None = None,
+        base_position: npt.ArrayLike | None = None,
+        base_orientation: npt.ArrayLike | None = None,
     ) -> None:
+        position, orientation = base_pose(base_position, base_orientation)
+        #: Where the root link sits in the world (m), and its orientation (w, x, y, z).
+        self.base_position: tuple[float, float, float] = position
+        self.base_orientation: tuple[float, float, float, float] = orientation
+        #: The root link's pose in the world, 4x4 (read-only).
+        self.base_transform: FloatArray = pose_matrix(position, orientation)
+        self.base_transform.flags.writeable = False
         parsed = read_urdf(urdf, allow_external_meshes=allow_external_meshes)
         self.parsed: ParsedURDF = parsed
         self.urdf_path: Path = parsed.path
@@ -99,7 +220,13 @@ class RobotModel:
         self.name: str = str(robot.name)
         self.link_names: tuple[str, ...] = tuple(link.name for link in robot.links)
         if not self.link_names:
-            raise URDFError(f"URDF {str(self.urdf_path)!r} defines no <link>")
+            raise URDFError(f"URDF {str(self.urdf_path)!r} defines no <link>; a robot needs links joined by joints")
+        if not robot.joints:
+            raise URDFError(
+                f"URDF {str(self.urdf_path)!r} defines no <joint> (links: {', '.join(self.link_names[:5])}"
+                f"{'...' if len(self.link_names) > 5 else ''}); an arm needs links joined by revolute, continuous "
+                "or prismatic joints"
+            )
         joints = {joint.name: joint for joint in robot.joints}
         child_to_joint: dict[str, Any] = {}
         for joint in robot.joints:
@@ -115,14 +242,20 @@ class RobotModel:
         roots = [name for name in self.link_names if name not in child_to_joint]
         if len(roots) != 1:
             raise URDFError(
-                f"URDF {str(self.urdf_path)!r} must have exactly one root link, found {roots or 'none (a cycle)'}"
+                f"URDF {str(self.urdf_path)!r} must have exactly one root link, found "
+                f"{', '.join(repr(r) for r in roots) + ' (links no joint connects)' if roots else 'none (a cycle)'}"
             )
         self.root_link: str = roots[0]
+        if not any(joint.type in MOVABLE_TYPES for joint in robot.joints):
+            raise URDFError(
+                f"URDF {str(self.urdf_path)!r} has no movable joint (its joints are "
+                f"{', '.join(sorted({str(j.type) for j in robot.joints}))}); an arm needs revolute, continuous or "
+                "prismatic joints"
+            )
         self._child_to_joint = child_to_joint
-        self._joint_types = {str(joint.name): str(joint.type) for joint in robot.joints}
-        self._children: dict[str, list[str]] = {name: [] for name in self.link_names}
-        for joint in robot.joints:
-            self._children[joint.parent].append(joint.child)
+        self._tree = Tree(self.name, self.root_link, self.link_names, robot.joints)
+        if len(self._tree.order) != len(self.link_names):
+            raise URDFError(f"the joints of {self.name!r} form a cycle; a URDF must be a tree")
 
         self.ee_link: str = self._choose_ee_link(ee_link)
         chain = self._chain_to(self.ee_link)
@@ -134,8 +267,12 @@ class RobotModel:
                     f"joint {name!r} has type {kind!r}; armreach supports fixed, revolute, continuous "
                     "and prismatic joints on the arm's chain"
                 )
-            if joints[name].mimic is not None:
-                raise URDFError(f"joint {name!r} is a mimic joint; mimic joints on the arm's chain are not supported")
+            if joints[name].mimic is not None and kind in MOVABLE_TYPES:
+                raise URDFError(
+                    f"joint {name!r} on the chain to {self.ee_link!r} is a mimic joint (it follows "
+                    f"{joints[name].mimic.joint!r}); armreach actuates every joint of the arm's chain: choose an "
+                    "end effector above it (ee_link=...)"
+                )
         if not movable:
             raise URDFError(
                 f"URDF {str(self.urdf_path)!r} has no movable joint between {self.root_link!r} and "
@@ -153,7 +290,8 @@ class RobotModel:
         self.upper: FloatArray = np.array([j.upper for j in self.joints])
         self.velocity_limits: FloatArray = np.array([j.velocity for j in self.joints])
         self._elements = self._build_chain(chain, joints)
-        self.home: FloatArray = self._home(home)
+        self.held_joints: tuple[HeldJoint, ...] = self._held_joints(robot.joints)
+        self.home: FloatArray = self._home(home, base_given=base_position is not None)
 
     # -- structure ---------------------------------------------------------------------
     @property
@@ -162,22 +300,24 @@ class RobotModel:
         return len(self.joints)
 
     def _choose_ee_link(self, ee_link: str | None) -> str:
+        """The end effector (given or the default), setting :attr:`gripper_joints` on the way."""
+        self.gripper_joints: tuple[str, ...] = ()
         if ee_link is not None:
             if ee_link not in self.link_names:
                 raise URDFError(
                     f"ee_link {ee_link!r} is not a link of {self.name!r}; links are: {', '.join(self.link_names)}"
                 )
+            try:
+                chain = set(self._chain_to(ee_link))
+                self.gripper_joints = tuple(j for j in self._tree.mount()[1] if j not in chain)
+            except URDFError:  # ambiguous without ee_link: no gripper to speak of
+                pass
+            log.info("end effector of %r: %r, given as ee_link", self.name, ee_link)
             return ee_link
-        leaves = [name for name, kids in self._children.items() if not kids]
-        depth = {leaf: self._movable_count(leaf) for leaf in leaves}
-        best = max(depth.values())
-        tips = [leaf for leaf in leaves if depth[leaf] == best]
-        if len(tips) > 1:
-            raise URDFError(
-                f"the chain of {self.name!r} branches, so the end effector is ambiguous: {', '.join(tips)} are "
-                "equally deep tips; pass ee_link=<link name> to choose one"
-            )
-        return tips[0]
+        choice = default_end_effector(self._tree)
+        self.gripper_joints = choice.gripper_joints
+        log.info("end effector of %r: %r, %s", self.name, choice.link, choice.reason)
+        return choice.link
 
     def _chain_to(self, link: str) -> list[str]:
         """Names of the joints from the root to ``link``, root first."""
@@ -193,9 +333,6 @@ class RobotModel:
         chain.reverse()
         return chain
 
-    def _movable_count(self, link: str) -> int:
-        return sum(1 for name in self._chain_to(link) if self._joint_types[name] in MOVABLE_TYPES)
-
     def _tool_joint(self, joints: dict[str, Any], name: str, chain: list[str]) -> Any:
         joint = joints.get(name)
         if joint is None:
@@ -207,8 +344,89 @@ class RobotModel:
         if name in chain:
             raise URDFError(f"tool joint {name!r} lies on the chain to {self.ee_link!r}, which is actuated already")
         if joint.mimic is not None:
-            raise URDFError(f"tool joint {name!r} is a mimic joint; actuate each finger as its own joint")
+            raise URDFError(
+                f"tool joint {name!r} is a mimic joint: it follows {joint.mimic.joint!r}, so it cannot be driven "
+                f"on its own; actuate {joint.mimic.joint!r} instead (its mimic joints follow it)"
+            )
         return joint
+
+    def _held_joints(self, urdf_joints: list[Any]) -> tuple[HeldJoint, ...]:
+        """Every movable joint not actuated, with where it is held and the master it mimics."""
+        joints = {str(j.name): j for j in urdf_joints}
+        actuated = set(self.joint_names)
+        free = {j.name: j for j in self.joints}
+
+        def rest(name: str) -> float:  # the URDF zero inside the limits (fixed joints sit at 0)
+            joint = joints[name]
+            if name in free:
+                return float(np.clip(0.0, free[name].lower, free[name].upper))
+            if str(joint.type) not in MOVABLE_TYPES:
+                return 0.0
+            lower, upper = self._held_limits(joint)
+            return float(np.clip(0.0, lower, upper))
+
+        held = []
+        for joint in urdf_joints:
+            name = str(joint.name)
+            if str(joint.type) not in MOVABLE_TYPES or name in actuated:
+                continue
+            mimic = self._resolve_mimic(joints, name)
+            lower, upper = self._held_limits(joint)
+            if mimic is None:
+                position = rest(name)
+            else:
+                position = float(np.clip(mimic.multiplier * rest(mimic.joint) + mimic.offset, lower, upper))
+            effort = joint.limit.effort if joint.limit is not None and joint.limit.effort is not None else None
+            effort = abs(_finite(effort, f"effort limit of joint {name!r}")) if effort is not None else 0.0
+            held.append(HeldJoint(name, str(joint.type), position, effort or DEFAULT_EFFORT_LIMIT, mimic))
+        return tuple(held)
+
+    @staticmethod
+    def _held_limits(joint: Any) -> tuple[float, float]:
+        limit = joint.limit
+        if str(joint.type) == "continuous" or limit is None or limit.lower is None or limit.upper is None:
+            return -math.inf, math.inf
+        lower = _finite(limit.lower, f"lower limit of joint {joint.name!r}")
+        upper = _finite(limit.upper, f"upper limit of joint {joint.name!r}")
+        return (lower, upper) if lower <= upper else (-math.inf, math.inf)
+
+    def _resolve_mimic(self, joints: dict[str, Any], name: str) -> Mimic | None:
+        """The mimic of joint ``name`` traced to a master that is no mimic joint, factors composed."""
+        multiplier, offset, seen = 1.0, 0.0, [name]
+        master = name
+        while True:
+            mimic = joints[master].mimic
+            if mimic is None or (master != name and str(joints[master].type) not in MOVABLE_TYPES):
+                break
+            if mimic.joint not in joints:
+                raise URDFError(
+                    f"joint {master!r} mimics {mimic.joint!r}, which is not a joint of {self.name!r}; "
+                    "fix the <mimic joint=...> attribute"
+                )
+            if mimic.joint in seen:
+                raise URDFError(f"the <mimic> joints {' -> '.join(seen)} -> {mimic.joint} form a cycle")
+            m = 1.0 if mimic.multiplier is None else _finite(mimic.multiplier, f"mimic multiplier of joint {master!r}")
+            o = 0.0 if mimic.offset is None else _finite(mimic.offset, f"mimic offset of joint {master!r}")
+            multiplier, offset = multiplier * m, multiplier * o + offset
+            master = str(mimic.joint)
+            seen.append(master)
+        return None if master == name else Mimic(master, multiplier, offset)
+
+    def held_positions(self, q: npt.ArrayLike) -> FloatArray:
+        """Where each of :attr:`held_joints` goes when the actuated joints are at ``q``.
+
+        The hold position, except for mimic joints of an actuated master, which follow it.
+        """
+        values = np.asarray(q, dtype=np.float64)
+        index = {name: i for i, name in enumerate(self.joint_names)}
+        out = np.empty(len(self.held_joints))
+        for i, joint in enumerate(self.held_joints):
+            mimic = joint.mimic
+            if mimic is not None and mimic.joint in index:
+                out[i] = mimic.multiplier * values[index[mimic.joint]] + mimic.offset
+            else:
+                out[i] = joint.position
+        return out
 
     @staticmethod
     def _joint_spec(joint: Any) -> JointSpec:
@@ -265,14 +483,42 @@ class RobotModel:
                 elements.append(_ChainElement(origin, axis, "fixed", -1))
         return tuple(elements)
 
-    def _home(self, home: npt.ArrayLike | None) -> FloatArray:
+    def _home(self, home: npt.ArrayLike | None, *, base_given: bool) -> FloatArray:
+        """The given home, checked (limits, ground), or the default one (:mod:`armreach_core.home`).
+
+        An arm that no pose keeps above the ground, and whose base position was not given,
+        has its base raised by what it lacks (logged), so that it works as it comes.
+        """
+        from armreach_core.home import BelowGroundError, check_home, default_home
+
         if home is None:
-            return np.clip(np.zeros(self.dof), self.lower, self.upper)
-        q = np.asarray(home, dtype=np.float64)
-        if q.shape != (self.dof,):
-            raise URDFError(f"home pose has shape {q.shape}, expected ({self.dof},) for joints {self.joint_names}")
+            try:
+                return default_home(self)
+            except BelowGroundError as exc:
+                if base_given:
+                    raise
+                position = (self.base_position[0], self.base_position[1], self.base_position[2] + exc.lift)
+                log.info("raised the base of %r by %.2f m: %s", self.name, exc.lift, exc)
+                self.base_position = position
+                self.base_transform = pose_matrix(position, self.base_orientation)
+                self.base_transform.flags.writeable = False
+                return default_home(self)
+        try:
+            q = np.asarray(home, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ConfigError(f"home={home!r} must be {self.dof} numbers, one per joint {self.joint_names}") from None
+        if q.shape != (self.dof,) or not np.all(np.isfinite(q)):
+            raise ConfigError(
+                f"home has shape {q.shape}, expected {self.dof} finite numbers, one per joint {self.joint_names}"
+            )
         if np.any(q < self.lower) or np.any(q > self.upper):
-            raise URDFError(f"home pose {q.tolist()} is outside the joint limits")
+            outside = [
+                f"{name}={value:.4g} not in [{lo:.4g}, {hi:.4g}]"
+                for name, value, lo, hi in zip(self.joint_names, q, self.lower, self.upper, strict=True)
+                if not lo <= value <= hi
+            ]
+            raise ConfigError(f"home is outside the joint limits: {', '.join(outside)}")
+        check_home(self, q)
         return q
 
     # -- kinematics --------------------------------------------------------------------
@@ -285,7 +531,7 @@ class RobotModel:
     def _frames(self, q: FloatArray) -> tuple[FloatArray, list[tuple[FloatArray, FloatArray, str]]]:
         """World transform of the end-effector link and, per actuated joint, (origin, axis, kind)."""
         batch = q.shape[:-1]
-        transform = np.broadcast_to(np.eye(4), (*batch, 4, 4)).copy()
+        transform = np.broadcast_to(self.base_transform, (*batch, 4, 4)).copy()
         joint_frames: list[tuple[FloatArray, FloatArray, str]] = []
         for element in self._elements:
             transform = transform @ element.origin
@@ -303,17 +549,21 @@ class RobotModel:
         return transform, joint_frames
 
     def forward_kinematics(self, q: npt.ArrayLike) -> FloatArray:
-        """End-effector position (m, base frame) for joint angles ``q`` of shape (dof,) or (batch, dof)."""
+        """End-effector position (m, world frame) for joint angles ``q`` of shape (dof,) or (batch, dof).
+
+        The world frame is the root link's frame moved by the base placement
+        (:attr:`base_transform`); with the default placement the two are the same.
+        """
         transform, _ = self._frames(self._check_q(q))
         return transform[..., :3, 3]
 
     def ee_transform(self, q: npt.ArrayLike) -> FloatArray:
-        """4x4 homogeneous transform of the end-effector link for ``q`` (batch-friendly)."""
+        """4x4 homogeneous transform of the end-effector link in the world for ``q`` (batch-friendly)."""
         transform, _ = self._frames(self._check_q(q))
         return transform
 
     def jacobian(self, q: npt.ArrayLike) -> FloatArray:
-        """Positional Jacobian d(ee position)/dq, shape (3, dof) or (batch, 3, dof)."""
+        """Positional Jacobian d(ee position)/dq in the world frame, shape (3, dof) or (batch, 3, dof)."""
         transform, frames = self._frames(self._check_q(q))
         ee = transform[..., :3, 3]
         columns = []

@@ -190,6 +190,11 @@ def read_urdf(path: str | os.PathLike[str], *, allow_external_meshes: bool | Non
         raise URDFError(f"URDF file {str(urdf_path)!r} is not well-formed XML: {exc}") from None
     if not isinstance(root.tag, str) or etree.QName(root).localname != "robot":
         raise URDFError(f"URDF file {str(urdf_path)!r} has root element <{root.tag}>, expected <robot>")
+    if not root.get("name"):
+        raise URDFError(
+            f"URDF file {str(urdf_path)!r}: the <robot> element has no name= attribute; the URDF format requires "
+            'one, such as <robot name="my_arm">'
+        )
     try:
         check_tree(root)
     except URDFError as exc:
@@ -215,6 +220,11 @@ def read_urdf(path: str | os.PathLike[str], *, allow_external_meshes: bool | Non
             load_meshes=False,
             mesh_dir=str(urdf_dir),
         )
-    except Exception as exc:  # yourdfpy raises bare ValueError/KeyError/TypeError on bad content
+    except KeyError as exc:  # an attribute the format requires, read without a check
+        raise URDFError(
+            f"URDF file {str(urdf_path)!r} could not be parsed: an element lacks the attribute {exc}, which the URDF "
+            "format requires; add it"
+        ) from None
+    except Exception as exc:  # yourdfpy raises bare ValueError/TypeError/AttributeError on bad content
         raise URDFError(f"URDF file {str(urdf_path)!r} could not be parsed: {type(exc).__name__}: {exc}") from None
     return ParsedURDF(path=urdf_path.resolve(), model=model, resolved_xml=resolved)

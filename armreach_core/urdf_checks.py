@@ -14,8 +14,8 @@ element, the attribute and the fix:
 * masses, inertias' principal moments, damping and friction are not negative, and an
   inertia tensor is positive semi-definite; geometry sizes are positive;
 * an ``<inertial>`` has both ``<mass>`` and ``<inertia>``; geometry has its sizes;
-* link and joint names are unique, joint types are URDF types, and a URDF has at most
-  :data:`MAX_LINKS` links.
+* link and joint names are unique, joint types are URDF types, a ``<mimic>`` names another
+  joint of the URDF, and a URDF has at most :data:`MAX_LINKS` links.
 
 Extension blocks (``<gazebo>``, ``<transmission>``, ``<mujoco>``...) are not checked:
 no engine armreach drives reads them.
@@ -181,7 +181,7 @@ def _check_joint(joint: Element) -> None:
     _check_origin(joint)
     axis = joint.find("axis")
     if axis is not None:
-        xyz = _numbers(axis, "xyz", 3)
+        xyz = _numbers(axis, "xyz", 3, required=True)  # the format requires it; leave <axis> out for 1 0 0
         if xyz is not None and kind not in ("fixed", "floating") and not any(xyz):
             raise URDFError(f"<axis xyz='0 0 0'> of {_where(joint)} has no direction; give the joint's unit axis")
     limit = joint.find("limit")
@@ -200,6 +200,11 @@ def _check_joint(joint: Element) -> None:
     if mimic is not None:
         _numbers(mimic, "multiplier", 1)
         _numbers(mimic, "offset", 1)
+        master = mimic.get("joint")
+        if not master:
+            raise URDFError(f"<mimic> of {_where(joint)} has no joint= attribute; name the joint it follows")
+        if master == joint.get("name"):
+            raise URDFError(f"<mimic> of {_where(joint)} names the joint itself; name the joint it follows")
     safety = joint.find("safety_controller")
     if safety is not None:
         for key in ("soft_lower_limit", "soft_upper_limit", "k_position", "k_velocity"):
@@ -236,3 +241,11 @@ def check_tree(root: Element) -> None:
         _check_link(link)
     for joint in joints:
         _check_joint(joint)
+    names = {joint.get("name") for joint in joints}
+    for joint in joints:
+        mimic = joint.find("mimic")
+        if mimic is not None and mimic.get("joint") not in names:
+            raise URDFError(
+                f"<mimic joint={mimic.get('joint')!r}> of {_where(joint)} names no joint of the URDF; "
+                "name the joint it follows"
+            )

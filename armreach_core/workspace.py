@@ -36,7 +36,8 @@ class ReachabilityMap:
         extent = float(np.max(points.max(axis=0) - points.min(axis=0)))
         voxel = max(voxel, extent / (MAX_VOXELS_PER_AXIS - 3))
         self.voxel = voxel
-        self.reach = float(np.max(np.linalg.norm(points, axis=1)))
+        #: The farthest the end effector gets from the arm's base (m).
+        self.reach = float(np.max(np.linalg.norm(points - np.asarray(robot.base_position), axis=1)))
         cells = np.floor(points / voxel).astype(np.int64)
         self.origin = cells.min(axis=0) - 1
         shape = cells.max(axis=0) - self.origin + 2
@@ -78,7 +79,7 @@ class TargetSampler:
 
     Args:
         robot: the arm.
-        center: centre of the ball (m, base frame).
+        center: centre of the ball (m, world frame).
         radius: radius of the ball (m).
         min_height: lowest allowed target height (m).
     """

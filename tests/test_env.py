@@ -141,10 +141,13 @@ def test_truncation_at_max_episode_steps(backend):
 
 @pytest.mark.parametrize("mode", ["clip", "terminate"])
 def test_joint_limit_rule(backend, mode):
-    home = (0.0, -1.5707963, 3.1415, -1.5707963, -1.5707963, 0.0)  # elbow at its upper limit
+    env = ArmReach6DOFEnv(backend=backend, joint_limit_mode=mode)
+    upper = env.unwrapped.robot.upper[0]
+    env.close()
+    home = (upper - 1e-4, -1.5707963, 1.5707963, -1.5707963, -1.5707963, 0.0)  # the base joint at its upper limit
     env = ArmReach6DOFEnv(backend=backend, home=home, joint_limit_mode=mode)
     env.reset(seed=0)
-    _, _, terminated, _, info = env.step(np.array([0, 0, 1, 0, 0, 0], dtype=np.float32))
+    _, _, terminated, _, info = env.step(np.array([1, 0, 0, 0, 0, 0], dtype=np.float32))
     assert info["joint_limit_violation"] is True
     assert terminated is (mode == "terminate")
     env.close()

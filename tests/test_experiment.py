@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 
 from armreach_core.cli import main
-from armreach_core.rl.experiment import Arm, run_experiment
+from armreach_core.rl.experiment import Contender, run_experiment
 from armreach_core.rl.report import write_report
 
 pytestmark = pytest.mark.training
@@ -27,9 +27,9 @@ def test_experiment_writes_the_report_and_figures(tmp_path: Path) -> None:
     preset = tmp_path / "tiny.yaml"
     preset.write_text(TINY)
     out = tmp_path / "exp"
-    arms = [Arm("PPO", "ppo", str(preset)), Arm("DDPG", "ddpg", str(preset))]
+    contenders = [Contender("PPO", "ppo", str(preset)), Contender("DDPG", "ddpg", str(preset))]
     log = io.StringIO()
-    results, ik = run_experiment(out, arms, seeds=2, episodes=2, stream=log, eval_max_episode_steps=60)
+    results, ik = run_experiment(out, contenders, seeds=2, episodes=2, stream=log, eval_max_episode_steps=60)
     assert [len(r.summaries) for r in results] == [2, 2]
     assert sorted(p.name for p in out.iterdir()) == ["ddpg-tiny-s0", "ddpg-tiny-s1", "ik", "ppo-tiny-s0", "ppo-tiny-s1"]
     report = write_report(out, results, ik, episodes=2, backend="pybullet", command="armreach experiment paper")
@@ -47,7 +47,7 @@ def test_experiment_writes_the_report_and_figures(tmp_path: Path) -> None:
         assert gif.n_frames > 5
     # A second start reuses every finished run instead of training again.
     log2 = io.StringIO()
-    run_experiment(out, arms, seeds=2, episodes=2, stream=log2, eval_max_episode_steps=60)
+    run_experiment(out, contenders, seeds=2, episodes=2, stream=log2, eval_max_episode_steps=60)
     assert log2.getvalue().count("reusing") == 4
     assert "training" not in log2.getvalue()
 
@@ -66,15 +66,15 @@ def test_an_experiment_folder_is_not_silently_reused_with_other_settings(tmp_pat
     preset.write_text(TINY)
     out = tmp_path / "exp"
     log = io.StringIO()
-    run_experiment(out, [Arm("DDPG", "ddpg", str(preset))], episodes=1, stream=log, eval_max_episode_steps=20)
+    run_experiment(out, [Contender("DDPG", "ddpg", str(preset))], episodes=1, stream=log, eval_max_episode_steps=20)
     # Longer runs with the same settings extend the finished one...
     log = io.StringIO()
     results, _ = run_experiment(
-        out, [Arm("DDPG", "ddpg", str(preset), steps=200)], episodes=1, stream=log, eval_max_episode_steps=20
+        out, [Contender("DDPG", "ddpg", str(preset), steps=200)], episodes=1, stream=log, eval_max_episode_steps=20
     )
     assert "extending DDPG" in log.getvalue()
     assert results[0].timesteps == [200]
     # ... while other settings are refused instead of being mixed into one table.
     preset.write_text(TINY.replace("batch_size: 16", "batch_size: 8"))
     with pytest.raises(ConfigError, match=r"holds a run with other settings \(batch_size: 16 here, 8 asked\)"):
-        run_experiment(out, [Arm("DDPG", "ddpg", str(preset), steps=200)], episodes=1, eval_max_episode_steps=20)
+        run_experiment(out, [Contender("DDPG", "ddpg", str(preset), steps=200)], episodes=1, eval_max_episode_steps=20)

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from armreach_core.errors import ConfigError
+from armreach_core.rl.config import resolve_config
 from armreach_core.rl.presets import bundled_presets, load_preset, parse_preset
-from armreach_core.rl.train import resolve_config
 
 
 def test_bundled_presets_load_and_validate() -> None:
@@ -40,15 +42,27 @@ def test_paper_preset_is_the_papers_settings() -> None:
         assert settings["env"] == {"max_episode_steps": 2048, "joint_limit_mode": "terminate"}
 
 
+def _ou_sigma(noise: Callable[[], np.ndarray], n_actions: int, draws: int = 4000) -> float:
+    """The sigma of an Ornstein-Uhlenbeck noise process, measured from its output.
+
+    SB3's process steps ``x += theta (mu - x) dt + sigma sqrt(dt) N(0, 1)`` with ``dt = 0.01``;
+    near ``mu`` the drift is tiny, so the steps' spread divided by ``sqrt(dt)`` is sigma.
+    """
+    samples = np.asarray([noise() for _ in range(draws)])
+    assert samples.shape == (draws, n_actions)
+    return float(np.diff(samples, axis=0).std() / np.sqrt(0.01))
+
+
 def test_paper_models_are_built_with_those_settings(tmp_path: Path) -> None:
     import torch
+    from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
 
     from armreach_core.rl.agents import build_model, make_vec_env
 
     for algo in ("ppo", "ddpg"):
         config = resolve_config(algo=algo, preset="paper")
         env = make_vec_env(config, tmp_path / algo, 0, 1, append=False)
-        model = build_model(algo, config["settings"], env, 0, None, "cpu")
+        model = build_model(algo, config.settings, env, 0, None, "cpu")
         assert model.gamma == 0.99
         assert model.batch_size == 300
         if algo == "ppo":
@@ -60,8 +74,8 @@ def test_paper_models_are_built_with_those_settings(tmp_path: Path) -> None:
         else:
             assert model.tau == 0.005
             assert model.learning_rate == 1e-3
-            assert type(model.action_noise).__name__ == "OrnsteinUhlenbeckActionNoise"
-            assert model.action_noise._sigma.tolist() == [0.1] * 6
+            assert isinstance(model.action_noise, OrnsteinUhlenbeckActionNoise)
+            assert _ou_sigma(model.action_noise, n_actions=6) == pytest.approx(0.1, rel=0.05)
             layers = [m for m in model.actor.mu if isinstance(m, torch.nn.Linear)]
             assert [m.out_features for m in layers][:2] == [256, 256]
         env.close()
@@ -110,8 +124,8 @@ def test_a_preset_file_works_like_a_bundled_one(tmp_path: Path) -> None:
     path = tmp_path / "mine.yaml"
     path.write_text("description: mine\nreach:\n  sac:\n    timesteps: 123\n    gamma: 0.9\n")
     config = resolve_config(algo="sac", preset=str(path), seed=4, her=True)
-    assert config["preset"] == "mine"
-    assert config["timesteps"] == 123
-    assert config["settings"]["gamma"] == 0.9
-    assert config["settings"]["her"]["goal_selection_strategy"] == "future"
-    assert config["seed"] == 4
+    assert config.preset == "mine"
+    assert config.timesteps == 123
+    assert config.settings["gamma"] == 0.9
+    assert config.settings["her"]["goal_selection_strategy"] == "future"
+    assert config.seed == 4

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -18,6 +20,7 @@ import yaml
 from armreach_core.cli import main
 from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
+from armreach_core.rl.config import RunConfig
 from armreach_core.rl.train import train
 
 pytestmark = pytest.mark.training
@@ -57,6 +60,49 @@ def tiny(tmp_path: Path) -> str:
     return str(path)
 
 
+#: A ``config.yaml`` exactly as armreach wrote it before runs had a typed config (``armreach train
+#: --algo ddpg --preset tiny.yaml --steps 150``); run folders like it must keep working.
+TODAYS_CONFIG = """\
+algo: ddpg
+task: reach
+backend: pybullet
+preset: tiny
+preset_source: {preset}
+seed: 0
+timesteps: 150
+n_envs: 1
+urdf: null
+ee_link: null
+device: auto
+eval_max_episode_steps: 2048
+settings:
+  timesteps: 300
+  env:
+    max_episode_steps: 64
+  policy:
+    net_arch:
+    - 16
+    - 16
+  learning_starts: 64
+  batch_size: 32
+  checkpoint_every: 100
+  noise:
+    type: ornstein-uhlenbeck
+    sigma: 0.1
+"""
+
+
+def _tensorboard_scalars(run_dir: Path) -> set[str]:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    tags: set[str] = set()
+    for path in (run_dir / "tb").rglob("events.out.tfevents.*"):
+        events = EventAccumulator(str(path))
+        events.Reload()
+        tags |= set(events.Tags()["scalars"])
+    return tags
+
+
 def _monitor_rows(run_dir: Path) -> list[list[str]]:
     rows = []
     for path in sorted((run_dir / "monitor").glob("*.monitor.csv")):
@@ -65,9 +111,15 @@ def _monitor_rows(run_dir: Path) -> list[list[str]]:
 
 
 @pytest.mark.parametrize(("algo", "extra"), [("ppo", []), ("ddpg", []), ("td3", []), ("sac", []), ("sac", ["--her"])])
-def test_train_then_evaluate(tmp_path: Path, tiny: str, algo: str, extra: list[str]) -> None:
+def test_train_then_evaluate(
+    tmp_path: Path, tiny: str, algo: str, extra: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
     run_dir = tmp_path / "run"
     assert main(["train", "--algo", algo, "--preset", tiny, "--seed", "3", "--out", str(run_dir), *extra]) == 0
+    progress_bar = capsys.readouterr().err
+    total = yaml.safe_load((run_dir / "config.yaml").read_text())["timesteps"]
+    assert f"{total}/{total}" in progress_bar and "step/s" in progress_bar  # tqdm's bar, to the end
+    assert re.search(r"success \(last 100 ep\.\) \d+\.\d%", progress_bar)
     config = yaml.safe_load((run_dir / "config.yaml").read_text())
     assert (config["algo"], config["seed"], config["preset"]) == (algo, 3, "tiny")
     assert config["settings"]["policy"]["net_arch"] == [16, 16]
@@ -80,7 +132,9 @@ def test_train_then_evaluate(tmp_path: Path, tiny: str, algo: str, extra: list[s
     assert "stable-baselines3" in environment["versions"]
     assert any(p["name"] == "pybullet" for p in environment["plugins"])
     assert (run_dir / "model.zip").stat().st_size > 0
-    assert any((run_dir / "tb").rglob("events.out.tfevents.*"))
+    scalars = _tensorboard_scalars(run_dir)
+    # SB3's own names: success comes from the envs' info["is_success"] at each episode's end.
+    assert {"rollout/ep_rew_mean", "rollout/success_rate"} <= scalars, scalars
     rows = _monitor_rows(run_dir)
     assert rows, "the monitor log records finished episodes"
     assert all(int(r[1]) <= 64 for r in rows)  # the preset's training episode length
@@ -102,11 +156,11 @@ def test_train_then_evaluate(tmp_path: Path, tiny: str, algo: str, extra: list[s
 @pytest.mark.parametrize("algo", ["ddpg", "td3", "sac"])
 def test_off_policy_agents_use_fused_adam_also_after_loading(tmp_path: Path, tiny: str, algo: str) -> None:
     from armreach_core.rl.agents import algo_class, build_model, make_vec_env
-    from armreach_core.rl.train import resolve_config
+    from armreach_core.rl.config import resolve_config
 
     config = resolve_config(algo=algo, preset=tiny)
     env = make_vec_env(config, tmp_path, 0, 1, append=False)
-    model = build_model(algo, config["settings"], env, 0, None, "cpu")
+    model = build_model(algo, config.settings, env, 0, None, "cpu")
     model.save(tmp_path / "model.zip")
     loaded = algo_class(algo).load(tmp_path / "model.zip", env=env, device="cpu")
     for agent in (model, loaded):
@@ -174,7 +228,7 @@ def test_bad_run_folders_give_clear_errors(tmp_path: Path, tiny: str, capsys: py
     assert main(["train", "--algo", "ddpg", "--preset", tiny, "--out", str(run_dir)]) == 2
     assert "already holds a run" in capsys.readouterr().err
     (run_dir / "checkpoint.zip").write_bytes(b"not a zip")
-    config = runs.read_config(run_dir) | {"timesteps": 200}
+    config = dataclasses.replace(runs.read_config(run_dir), timesteps=200)
     with pytest.raises(ConfigError, match="cannot load .*checkpoint.zip"):
         train(config, run_dir, resume=True, stream=None)
     (run_dir / "model.zip").write_bytes(b"junk")
@@ -198,10 +252,10 @@ def test_atomic_write_keeps_the_old_file_when_the_writer_fails(tmp_path: Path) -
 
 
 def test_her_waits_for_the_first_episode(tiny: str, tmp_path: Path) -> None:
-    from armreach_core.rl.train import resolve_config
+    from armreach_core.rl.config import resolve_config
 
     config = resolve_config(algo="ddpg", preset="paper", her=True)
-    assert config["settings"]["learning_starts"] == 2048  # the paper's episode length
+    assert config.settings["learning_starts"] == 2048  # the paper's episode length
     bad = tmp_path / "bad.yaml"
     bad.write_text("reach:\n  sac:\n    env: {max_episode_steps: 100}\n    learning_starts: 10\n    her: {}\n")
     with pytest.raises(ConfigError, match=r"learning_starts \(10\) must be at least the training episode length"):
@@ -209,10 +263,10 @@ def test_her_waits_for_the_first_episode(tiny: str, tmp_path: Path) -> None:
 
 
 def test_ppo_totals_are_whole_rollouts_and_resume_keeps_the_count(tmp_path: Path, tiny: str) -> None:
-    from armreach_core.rl.train import resolve_config
+    from armreach_core.rl.config import resolve_config
 
-    assert resolve_config(algo="ppo", preset=tiny, steps=300)["timesteps"] == 320  # 5 rollouts of 64
-    assert resolve_config(algo="ppo", preset="fast")["timesteps"] == 196_608
+    assert resolve_config(algo="ppo", preset=tiny, steps=300).timesteps == 320  # 5 rollouts of 64
+    assert resolve_config(algo="ppo", preset="fast").timesteps == 196_608
     run_dir = tmp_path / "ppo"
     assert main(["train", "--algo", "ppo", "--preset", tiny, "--steps", "128", "--out", str(run_dir)]) == 0
     assert main(["train", "--resume", str(run_dir), "--steps", "200"]) == 0
@@ -240,10 +294,10 @@ def test_a_start_that_failed_before_its_first_checkpoint_can_start_again(tmp_pat
 
 def test_evaluation_is_the_papers_task_whatever_training_used() -> None:
     from armreach_core.rl.agents import env_kwargs
-    from armreach_core.rl.train import resolve_config
+    from armreach_core.rl.config import resolve_config
 
     config = resolve_config(algo="ppo", preset="fast")
-    assert config["settings"]["env"]["distance_exponent"] == 1.0
+    assert config.settings["env"]["distance_exponent"] == 1.0
     training = env_kwargs(config)
     evaluation = env_kwargs(config, evaluation=True)
     assert training["max_episode_steps"] == 100
@@ -262,9 +316,9 @@ def test_run_files_are_readable_like_any_other_file(tmp_path: Path) -> None:
 
 
 def test_run_seeds_give_disjoint_env_seeds() -> None:
-    from armreach_core.rl.train import _seed_base
+    from armreach_core.rl.train import seed_base
 
-    seeds = [set(range(_seed_base(s), _seed_base(s) + 64)) for s in range(20)]
+    seeds = [set(range(seed_base(s), seed_base(s) + 64)) for s in range(20)]
     assert all(a.isdisjoint(b) for i, a in enumerate(seeds) for b in seeds[i + 1 :])
     assert all(min(s) >= 10_100 for s in seeds)  # clear of the evaluation seeds 10000 + i
 
@@ -274,7 +328,7 @@ def _assert_run_readable(run_dir: Path) -> int:
     from stable_baselines3 import DDPG
 
     config = runs.read_config(run_dir)
-    assert config["algo"] == "ddpg"
+    assert config.algo == "ddpg"
     assert "train" in (run_dir / "command.txt").read_text(encoding="utf-8")
     assert "versions" in json.loads((run_dir / "environment.json").read_text(encoding="utf-8"))
     progress = json.loads((run_dir / "checkpoint.json").read_text(encoding="utf-8"))
@@ -371,10 +425,10 @@ def test_repeated_sigkills_at_random_moments_lose_nothing(tmp_path: Path) -> Non
 
 def _untrained_run(run_dir: Path, preset: str) -> Path:
     """A ddpg run folder with a (junk) checkpoint and model, made without training."""
-    from armreach_core.rl.train import resolve_config
+    from armreach_core.rl.config import resolve_config
 
     runs.new_run_dir(run_dir)
-    runs.write_yaml(run_dir / runs.CONFIG, resolve_config(algo="ddpg", preset=preset, steps=300))
+    runs.write_config(run_dir, resolve_config(algo="ddpg", preset=preset, steps=300))
     for name in (runs.MODEL, runs.CHECKPOINT):
         (run_dir / name).write_bytes(b"not a zip")
     return run_dir
@@ -411,3 +465,111 @@ def test_runs_other_users_could_have_written_are_refused_unless_trusted(
         (run_dir / runs.CHECKPOINT).chmod(0o664)
         with pytest.raises(ConfigError, match="writable by group id 54321"):
             runs.check_trusted(run_dir)
+
+
+def test_a_run_folder_in_todays_format_reads_back_evaluates_and_resumes(tmp_path: Path, tiny: str) -> None:
+    run_dir = tmp_path / "run"
+    assert main(["train", "--algo", "ddpg", "--preset", tiny, "--steps", "150", "--out", str(run_dir)]) == 0
+    todays = TODAYS_CONFIG.format(preset=Path(tiny).resolve())
+    assert (run_dir / "config.yaml").read_text() == todays  # the format has not changed
+    # A key this version does not know (a newer version's, or a note by hand) is kept and otherwise ignored.
+    (run_dir / "config.yaml").write_text(todays + "note: by hand\n")
+    config = runs.read_config(run_dir)
+    assert (config.algo, config.timesteps, config.n_envs, config.settings["batch_size"]) == ("ddpg", 150, 1, 32)
+    assert config.extra == {"note": "by hand"}
+    assert RunConfig.from_dict(config.to_dict()) == config
+    assert main(["evaluate", str(run_dir), "--episodes", "1", "--max-episode-steps", "20"]) == 0
+    assert main(["train", "--resume", str(run_dir), "--steps", "250"]) == 0
+    assert json.loads((run_dir / "checkpoint.json").read_text())["timesteps"] == 250
+    rewritten = yaml.safe_load((run_dir / "config.yaml").read_text())
+    assert rewritten == {**yaml.safe_load(todays), "timesteps": 250, "note": "by hand"}
+
+
+def test_optional_config_keys_take_the_defaults_new_runs_record() -> None:
+    data = yaml.safe_load(TODAYS_CONFIG.format(preset="/x/tiny.yaml"))
+    for key in ("preset_source", "urdf", "ee_link", "device", "eval_max_episode_steps"):
+        del data[key]
+    config = RunConfig.from_dict(data)
+    assert (config.preset_source, config.urdf, config.ee_link, config.device) == ("", None, None, "auto")
+    assert config.eval_max_episode_steps == 2048
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "match"),
+    [
+        ("n_envs", None, r"missing required key\(s\) 'n_envs'"),
+        ("settings", None, r"missing required key\(s\) 'settings'"),
+        ("seed", "three", r"seed: expected an integer, got 'three'"),
+        ("timesteps", True, r"timesteps: expected an integer, got True"),
+        ("n_envs", 0, r"n_envs: must be between 1 and 64, got 0"),
+        ("algo", "a2c", r"algo: must be one of \['ppo'"),
+        ("urdf", 3, r"urdf: expected a string or null, got 3"),
+        ("settings", [1, 2], r"settings: expected a mapping"),
+    ],
+)
+def test_a_config_yaml_missing_a_key_or_with_a_bad_value_names_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], key: str, value: object, match: str
+) -> None:
+    data = yaml.safe_load(TODAYS_CONFIG.format(preset="/x/tiny.yaml"))
+    if value is None:
+        del data[key]
+    else:
+        data[key] = value
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "config.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    with pytest.raises(ConfigError, match=match):
+        runs.read_config(run_dir)
+    for command in (["evaluate", str(run_dir)], ["train", "--resume", str(run_dir)]):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert "config.yaml" in err and re.search(match, err), err
+
+
+def test_a_run_config_is_frozen_and_checks_what_changes() -> None:
+    from armreach_core.rl.config import resolve_config
+
+    config = resolve_config(algo="ddpg", preset="paper")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        config.seed = 4  # type: ignore[misc]
+    faster = config.with_settings(torch_threads=2, train_freq=4)
+    assert (faster.torch_threads, faster.settings["train_freq"], config.torch_threads) == (2, 4, 0)
+    with pytest.raises(ConfigError, match=r"ddpg settings\.train_frq: unknown key"):
+        config.with_settings(train_frq=4)
+    with pytest.raises(ConfigError, match=r"n_envs: must be between 1 and 64"):
+        dataclasses.replace(config, n_envs=65)
+
+
+def test_the_cli_offers_every_algorithm_a_preset_can_have() -> None:
+    from armreach_core.cli.train import ALGOS as CLI_ALGOS
+    from armreach_core.rl.presets import ALGOS
+
+    assert CLI_ALGOS == ALGOS
+
+
+def test_without_stable_baselines3_training_names_the_extra_and_the_env_still_works(tmp_path: Path) -> None:
+    code = f"""
+import sys
+sys.modules["stable_baselines3"] = None  # as if it were not installed
+import gymnasium as gym
+import armreach_core
+from armreach_core.errors import MissingExtraError
+env = gym.make("armreach/Reach-v0")
+env.reset(seed=0)
+env.step(env.action_space.sample())
+env.close()
+try:
+    import armreach_core.rl.runs
+except MissingExtraError as exc:
+    assert isinstance(exc, ImportError)
+    print("rl:", exc)
+from armreach_core.cli import main
+raise SystemExit(main(["train", "--preset", "fast", "--steps", "64", "--out", {str(tmp_path / "run")!r}]))
+"""
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    assert "rl:" in result.stdout and "stable-baselines3" in result.stdout
+    assert "pip install 'armreach[rl]'" in result.stderr
+    assert "pip install -e '.[rl]'" in result.stderr
+    assert "Traceback" not in result.stderr
+    assert not (tmp_path / "run").exists()

@@ -48,9 +48,13 @@ def test_branching_chain_is_ambiguous(tmp_path):
     body = "".join(LINK.format(n) for n in ("base", "l1", "l2a", "l2b"))
     body += JOINT.format("j1", "base", "l1") + JOINT.format("j2a", "l1", "l2a") + JOINT.format("j2b", "l1", "l2b")
     path = _write(tmp_path, body)
-    with pytest.raises(URDFError, match="ambiguous.*ee_link"):
+    with pytest.raises(URDFError, match="ambiguous") as info:
         RobotModel(path)
-    assert RobotModel(path, ee_link="l2b").joint_names == ("j1", "j2b")
+    for link in ("l2a", "l2b"):  # each candidate, spelled for Python and for the command line
+        assert f'ee_link="{link}" (Python) or --ee-link {link} (command line)' in str(info.value)
+    robot = RobotModel(path, ee_link="l2b")
+    assert robot.joint_names == ("j1", "j2b")
+    assert [j.name for j in robot.held_joints] == ["j2a"]  # the other branch is held
 
 
 def test_unknown_ee_link(ar6_urdf):
@@ -148,6 +152,7 @@ UPPER_ARM_INERTIA = 'ixx="0.132451" ixy="0" ixz="0" iyy="0.132451" iyz="0" izz="
         ('damping="0.5"', 'damping="-1"', r"damping='-1' of <dynamics> of joint 'shoulder_pan_joint' must be >= 0"),
         ('lower="-6.283185"', 'lower="-1e30"', r"lower='-1e30' of <limit>.*beyond"),
         ('<axis xyz="0 0 1"/>', '<axis xyz="0 0 0"/>', "has no direction"),
+        ('<axis xyz="0 0 1"/>', "<axis/>", r"<axis> of joint 'shoulder_pan_joint' has no xyz= attribute"),
         ('type="revolute"', 'type="hinge"', "type 'hinge'; URDF joint types are"),
         ("</robot>", '<link name="tool0"/></robot>', "link name 'tool0' is used twice"),
         # a duplicate joint name made PyBullet's loader crash with a segmentation fault
@@ -190,3 +195,70 @@ def test_names_too_long_to_look_up_are_urdf_errors(tmp_path):
         RobotModel(_write(tmp_path, body + LINK.format("b") + JOINT.format("j", "a", "b")))
     with pytest.raises(URDFError, match="not found"):
         armreach_core.ArmReach6DOFEnv(urdf=tmp_path / ("u" * 300 + ".urdf"))
+
+
+FIXED = '<joint name="{0}" type="fixed"><parent link="{1}"/><child link="{2}"/></joint>'
+MIMIC = (
+    '<joint name="{0}" type="prismatic"><parent link="{1}"/><child link="{2}"/><axis xyz="0 1 0"/>'
+    '<limit lower="0" upper="0.04" effort="10" velocity="1"/>{3}</joint>'
+)
+ARM = "".join(LINK.format(n) for n in "abcd") + JOINT.format("j1", "a", "b") + JOINT.format("j2", "b", "c")
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ('<robot><link name="a"/></robot>', r'the <robot> element has no name= attribute.*<robot name="my_arm">'),
+        ("<robot/>", "the <robot> element has no name= attribute"),
+        ('<robot name="t"></robot>', "defines no <link>"),
+        ('<robot name="t">' + LINK.format("a") + LINK.format("b") + "</robot>", r"defines no <joint> \(links: a, b\)"),
+        (
+            '<robot name="t">' + LINK.format("a") + LINK.format("b") + FIXED.format("j", "a", "b") + "</robot>",
+            r"has no movable joint \(its joints are fixed\)",
+        ),
+        (
+            '<robot name="t">' + "".join(LINK.format(n) for n in "abc") + JOINT.format("j", "a", "b") + "</robot>",
+            r"exactly one root link, found 'a', 'c' \(links no joint connects\)",
+        ),
+        (
+            f'<robot name="t">{ARM}' + MIMIC.format("f", "c", "d", '<mimic joint="nope"/>') + "</robot>",
+            r"<mimic joint='nope'> of joint 'f' names no joint of the URDF",
+        ),
+        (
+            f'<robot name="t">{ARM}' + MIMIC.format("f", "c", "d", "<mimic/>") + "</robot>",
+            r"<mimic> of joint 'f' has no joint= attribute",
+        ),
+        (
+            f'<robot name="t">{ARM}' + MIMIC.format("f", "c", "d", '<mimic joint="f"/>') + "</robot>",
+            r"<mimic> of joint 'f' names the joint itself",
+        ),
+    ],
+)
+def test_malformed_robots_say_what_is_missing(tmp_path, text, message):
+    path = tmp_path / "robot.urdf"
+    path.write_text(text)
+    with pytest.raises(URDFError, match=message) as info:
+        RobotModel(path)
+    assert "KeyError" not in str(info.value) and "AttributeError" not in str(info.value)
+
+
+def test_a_cycle_of_mimic_joints_is_a_urdf_error(tmp_path):
+    body = ARM + LINK.format("e")
+    body += MIMIC.format("f1", "c", "d", '<mimic joint="f2"/>') + MIMIC.format("f2", "c", "e", '<mimic joint="f1"/>')
+    with pytest.raises(URDFError, match="mimic> joints f1 -> f2 -> f1 form a cycle"):
+        RobotModel(_write(tmp_path, body))
+
+
+def test_a_mimic_joint_is_no_tool_joint(tmp_path):
+    body = ARM + LINK.format("e") + MIMIC.format("f1", "c", "d", "")
+    body += MIMIC.format("f2", "c", "e", '<mimic joint="f1" multiplier="-1"/>')
+    path = _write(tmp_path, body)
+    with pytest.raises(URDFError, match="tool joint 'f2' is a mimic joint: it follows 'f1'.*actuate 'f1' instead"):
+        RobotModel(path, tool_joints=("f2",))
+    assert RobotModel(path, tool_joints=("f1",)).tool_joint_names == ("f1",)
+
+
+def test_a_mimic_joint_on_the_chain_names_its_master(tmp_path):
+    body = ARM + MIMIC.format("f", "c", "d", '<mimic joint="j2"/>')
+    with pytest.raises(URDFError, match="joint 'f' on the chain to 'd' is a mimic joint \\(it follows 'j2'\\)"):
+        RobotModel(_write(tmp_path, body), ee_link="d")

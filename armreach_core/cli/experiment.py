@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from armreach_core.rl import runs
+from armreach_core.defaults import DEFAULT_BACKEND
 
 
 def add_parser(sub: Any) -> None:
@@ -25,7 +25,7 @@ def add_parser(sub: Any) -> None:
         "default: the paper's 614,400",
     )
     parser.add_argument("--episodes", type=int, default=100, help="evaluation episodes per run (default: 100)")
-    parser.add_argument("--backend", default="pybullet", help="physics backend (default: pybullet)")
+    parser.add_argument("--backend", default=DEFAULT_BACKEND, help="physics backend (default: %(default)s)")
     parser.add_argument("--fast", action="store_true", help="add the `fast` preset's agent")
     parser.add_argument("--out", type=Path, default=None, help="experiment folder (default: runs/experiment-...)")
     parser.set_defaults(run=run)
@@ -45,17 +45,24 @@ def _steps(text: str) -> tuple[str | None, int]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from armreach_core.rl.experiment import paper_arms, run_experiment
+    from armreach_core.rl import runs
+    from armreach_core.rl.experiment import paper_contenders, run_experiment
     from armreach_core.rl.report import write_report
 
     out = args.out or runs.default_run_dir("runs", ["experiment", args.name])
     steps: dict[str, int] = {}
     for algo, n in args.steps or []:
         steps.update({"ppo": n, "ddpg": n} if algo is None else {algo: n})
-    arms = paper_arms(steps, args.fast)
+    contenders = paper_contenders(steps, args.fast)
     try:
         results, ik = run_experiment(
-            out, arms, seeds=args.seeds, episodes=args.episodes, backend=args.backend, command=args.command_line
+            out,
+            contenders,
+            seeds=args.seeds,
+            episodes=args.episodes,
+            backend=args.backend,
+            stream=sys.stderr,
+            command=args.command_line,
         )
     except KeyboardInterrupt:
         print(
@@ -68,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     report = write_report(out, results, ik, episodes=args.episodes, backend=args.backend, command=command)
     for r in results:
         rates = ", ".join(f"{100 * s['success_rate']:.0f}%" for s in r.summaries)
-        print(f"{r.arm.label}: success {rates}")
+        print(f"{r.contender.label}: success {rates}")
     print(f"DLS IK reference: success {100 * ik.summary()['success_rate']:.0f}%")
     print(f"report: {report}")
     return 0

@@ -10,13 +10,13 @@ from typing import Any
 
 import numpy as np
 
+from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 from armreach_core.tools.parity import ParityReport, markdown, run_parity
 
 
 def add_parser(sub: Any) -> None:
     parser = sub.add_parser("parity", help="compare backends on one URDF: FK, trajectories, speed")
-    parser.add_argument("--urdf", default=None, help="URDF of the arm (default: the bundled ar6)")
-    parser.add_argument("--ee-link", default=None, help="end-effector link (default: the robot's)")
+    add_robot_arguments(parser)
     parser.add_argument(
         "--backends",
         nargs="+",
@@ -34,7 +34,11 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    report = run_parity(args.backends, args.urdf, args.ee_link, steps=args.steps, configs=args.configs, seed=args.seed)
+    robot = robot_kwargs(args)
+    urdf, ee_link = robot.pop("urdf", None), robot.pop("ee_link", None)
+    report = run_parity(
+        args.backends, urdf, ee_link, steps=args.steps, configs=args.configs, seed=args.seed, env_kwargs=robot
+    )
     out: Path = args.out or Path("runs") / time.strftime("parity-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
     (out / "report.md").write_text(markdown(report))

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.env import ArmEnv
 from armreach_core.ik import IKPolicy
@@ -18,8 +19,7 @@ from armreach_core.ik import IKPolicy
 def add_parser(sub: Any) -> None:
     parser = sub.add_parser("rollout", help="run one seeded episode and save a rendered PNG")
     parser.add_argument("--backend", default=DEFAULT_BACKEND, help=f"physics backend (default: {DEFAULT_BACKEND})")
-    parser.add_argument("--urdf", default=None, help="URDF of the arm (default: the bundled ar6)")
-    parser.add_argument("--ee-link", default=None, help="end-effector link (default: the chain's tip)")
+    add_robot_arguments(parser)
     parser.add_argument("--policy", choices=("ik", "random"), default="ik", help="controller (default: ik)")
     parser.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
     parser.add_argument("--max-steps", type=int, default=400, help="step limit (default: 400)")
@@ -33,15 +33,14 @@ def run(args: argparse.Namespace) -> int:
     env = ArmEnv(
         DEFAULT_TASK,
         backend=args.backend,
-        urdf=args.urdf,
-        ee_link=args.ee_link,
         render_mode="rgb_array",
+        **robot_kwargs(args),
         max_episode_steps=args.max_steps,
     )
     try:
         _, info = env.reset(seed=args.seed)
         env.action_space.seed(args.seed)
-        policy = IKPolicy(env.robot, env.max_joint_step)
+        policy = IKPolicy(env.robot, env.max_joint_step, restarts=16)
         frames = [env.render()]
         steps, total = 0, 0.0
         while True:

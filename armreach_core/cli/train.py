@@ -1,27 +1,40 @@
-"""``armreach train``: train an agent with a preset into a run folder (or continue one)."""
+"""``armreach train``: train an agent with a preset into a run folder (or continue one).
+
+Training is the ``rl`` extra: :mod:`armreach_core.rl` is imported only when the command
+runs, so that ``armreach`` itself works without it (and says what to install when a
+training command needs it).
+"""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.robot_args import add_robot_arguments
+from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.errors import ConfigError
-from armreach_core.rl import runs
-from armreach_core.rl.presets import ALGOS
+
+#: ``--algo`` choices: :data:`armreach_core.rl.presets.ALGOS`, spelled out so that ``--help``
+#: works without the rl extra (a test keeps the two equal).
+ALGOS = ("ppo", "ddpg", "td3", "sac", "ik")
 
 #: Flags that define a run; with --resume they come from the run's config instead.
 RESUME_CONFLICTS = (
     ("--algo", "algo", None),
     ("--preset", "preset", "paper"),
-    ("--task", "task", "reach"),
-    ("--backend", "backend", "pybullet"),
+    ("--task", "task", DEFAULT_TASK),
+    ("--backend", "backend", DEFAULT_BACKEND),
     ("--her", "her", False),
     ("--seed", "seed", 0),
     ("--n-envs", "n_envs", None),
     ("--urdf", "urdf", None),
     ("--ee-link", "ee_link", None),
+    ("--home", "home", None),
+    ("--base-position", "base_position", None),
+    ("--base-orientation", "base_orientation", None),
     ("--out", "out", None),
 )
 
@@ -32,14 +45,13 @@ def add_parser(sub: Any) -> None:
         "--algo", choices=ALGOS, default=None, help="algorithm (default: the preset's own; ddpg for paper)"
     )
     parser.add_argument("--preset", default="paper", help="bundled preset (paper, fast) or a YAML file")
-    parser.add_argument("--task", default="reach", help="registered task (default: reach)")
-    parser.add_argument("--backend", default="pybullet", help="physics backend (default: pybullet)")
+    parser.add_argument("--task", default=DEFAULT_TASK, help="registered task (default: %(default)s)")
+    parser.add_argument("--backend", default=DEFAULT_BACKEND, help="physics backend (default: %(default)s)")
     parser.add_argument("--her", action="store_true", help="hindsight experience replay (off-policy algorithms)")
     parser.add_argument("--steps", type=int, default=None, help="total env steps (default: the preset's)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     parser.add_argument("--n-envs", type=int, default=None, help="parallel envs (default: the preset's, or 1)")
-    parser.add_argument("--urdf", default=None, help="URDF of the arm (default: the task's robot)")
-    parser.add_argument("--ee-link", default=None, help="end-effector link")
+    add_robot_arguments(parser)
     parser.add_argument(
         "--threads", type=int, default=None, help="torch CPU threads (default: the preset's, else torch's)"
     )
@@ -53,7 +65,9 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from armreach_core.rl.train import default_algo, extend, resolve_config, train
+    from armreach_core.rl import runs
+    from armreach_core.rl.config import default_algo, extend, resolve_config
+    from armreach_core.rl.train import train
 
     if args.resume is not None:
         run_dir: Path = args.resume
@@ -67,11 +81,13 @@ def run(args: argparse.Namespace) -> int:
         if args.steps is not None:
             config = extend(config, args.steps)
         if args.threads is not None:
-            config["settings"]["torch_threads"] = int(args.threads)
+            if args.threads < 1:
+                raise ConfigError(f"--threads must be >= 1, got {args.threads}")
+            config = config.with_settings(torch_threads=args.threads)
         if args.device != "auto":
-            config["device"] = args.device
-        print(f"resuming {run_dir} towards {config['timesteps']} steps")
-        result = train(config, run_dir, resume=True, command=args.command_line, trust=args.trust)
+            config = dataclasses.replace(config, device=args.device)
+        print(f"resuming {run_dir} towards {config.timesteps} steps")
+        result = train(config, run_dir, resume=True, stream=sys.stderr, command=args.command_line, trust=args.trust)
     else:
         config = resolve_config(
             algo=args.algo or default_algo(args.preset, args.task),
@@ -86,18 +102,19 @@ def run(args: argparse.Namespace) -> int:
             ee_link=args.ee_link,
             device=args.device,
             threads=args.threads,
+            placement={key: getattr(args, key) for key in ("home", "base_position", "base_orientation")},
         )
-        her = "-her" if "her" in config["settings"] else ""
-        name = [config["algo"] + her, config["preset"], config["backend"], f"s{args.seed}"]
+        her = "-her" if config.uses_her else ""
+        name = [config.algo + her, config.preset, config.backend, f"s{config.seed}"]
         run_dir = args.out or runs.default_run_dir("runs", name)
-        if config["algo"] == "ik":
+        if not config.learns:
             runs.new_run_dir(run_dir)
-            runs.write_yaml(run_dir / runs.CONFIG, config)
+            runs.write_config(run_dir, config)
             runs.record_command(run_dir, args.command_line)
             runs.write_json(run_dir / runs.ENVIRONMENT, runs.environment_record())
             print(f"ik has nothing to train; evaluate it with `armreach evaluate {run_dir}`")
             return 0
-        result = train(config, run_dir, command=args.command_line)
+        result = train(config, run_dir, stream=sys.stderr, command=args.command_line)
     if result.interrupted:
         print(
             f"interrupted at {result.timesteps}/{result.total} steps; checkpoint saved. "

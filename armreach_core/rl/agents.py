@@ -8,8 +8,9 @@ same code as the learned policies.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -17,7 +18,11 @@ import numpy.typing as npt
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
 from armreach_core.ik import IKPolicy
-from armreach_core.rl.presets import OFF_POLICY
+from armreach_core.rl.config import RunConfig
+
+if TYPE_CHECKING:
+    from stable_baselines3.common.base_class import BaseAlgorithm
+    from stable_baselines3.common.vec_env import DummyVecEnv
 
 
 class Agent(Protocol):
@@ -28,31 +33,33 @@ class Agent(Protocol):
 
 #: Env settings evaluation keeps from training: they define what an action means.
 ACTION_SETTINGS = ("max_joint_step", "substeps")
+#: Where the arm starts and sits: kept by evaluation like the action's meaning.
+PLACEMENT_SETTINGS = ("home", "base_position", "base_orientation")
 
 
-def env_kwargs(config: dict[str, Any], *, backend: str | None = None, evaluation: bool = False) -> dict[str, Any]:
+def env_kwargs(config: RunConfig, *, backend: str | None = None, evaluation: bool = False) -> dict[str, Any]:
     """ArmEnv keyword arguments for a run config.
 
     ``evaluation`` gives the paper's task whatever training used: the 2048-step limit
     (``eval_max_episode_steps``), joint-limit violations ending the episode, the 5 cm
     success radius and the paper's reward; only the action's meaning is kept.
     """
-    kwargs: dict[str, Any] = dict(config.get("settings", {}).get("env", {}))
+    kwargs = config.env_settings
     if evaluation:
-        kwargs = {k: v for k, v in kwargs.items() if k in ACTION_SETTINGS}
-        kwargs["max_episode_steps"] = int(config.get("eval_max_episode_steps", 2048))
+        kwargs = {k: v for k, v in kwargs.items() if k in ACTION_SETTINGS + PLACEMENT_SETTINGS}
+        kwargs["max_episode_steps"] = config.eval_max_episode_steps
         kwargs["joint_limit_mode"] = "terminate"
-    kwargs.update(task=config["task"], backend=backend or config["backend"])
-    if config.get("urdf"):
-        kwargs["urdf"] = config["urdf"]
-    if config.get("ee_link"):
-        kwargs["ee_link"] = config["ee_link"]
-    if "her" in config.get("settings", {}):
+    kwargs.update(task=config.task, backend=backend or config.backend)
+    if config.urdf:
+        kwargs["urdf"] = config.urdf
+    if config.ee_link:
+        kwargs["ee_link"] = config.ee_link
+    if config.uses_her:
         kwargs["goal_conditioned"] = True
     return kwargs
 
 
-def make_vec_env(config: dict[str, Any], run_dir: Path, seed: int, n_envs: int, *, append: bool) -> Any:
+def make_vec_env(config: RunConfig, run_dir: Path, seed: int, n_envs: int, *, append: bool) -> DummyVecEnv:
     """``n_envs`` Monitor-wrapped envs in one process, logging episodes to ``run_dir/monitor/``.
 
     Env ``i`` is seeded ``seed + i`` at its first reset (SB3's ``VecEnv.seed``).
@@ -80,16 +87,18 @@ def make_vec_env(config: dict[str, Any], run_dir: Path, seed: int, n_envs: int, 
     return vec
 
 
-def algo_class(algo: str) -> Any:
+def algo_class(algo: str) -> type[BaseAlgorithm]:
     import stable_baselines3 as sb3
 
-    classes = {"ppo": sb3.PPO, "ddpg": sb3.DDPG, "td3": sb3.TD3, "sac": sb3.SAC}
+    classes: dict[str, type[BaseAlgorithm]] = {"ppo": sb3.PPO, "ddpg": sb3.DDPG, "td3": sb3.TD3, "sac": sb3.SAC}
     if algo not in classes:
         raise ConfigError(f"algorithm {algo!r} is not a learning algorithm; use one of {sorted(classes)}")
     return classes[algo]
 
 
-def build_model(algo: str, settings: dict[str, Any], env: Any, seed: int, tb_dir: Path | None, device: str) -> Any:
+def build_model(
+    algo: str, settings: Mapping[str, Any], env: Any, seed: int, tb_dir: Path | None, device: str
+) -> BaseAlgorithm:
     """A fresh SB3 model for ``algo`` with ``settings`` (validated preset values)."""
     import torch
     from stable_baselines3 import HerReplayBuffer
@@ -147,14 +156,10 @@ def build_model(algo: str, settings: dict[str, Any], env: Any, seed: int, tb_dir
         return algo_class(algo)(policy_name, env, **kwargs)
 
 
-def is_off_policy(algo: str) -> bool:
-    return algo in OFF_POLICY
-
-
 class SB3Agent:
     """A trained SB3 model acting deterministically."""
 
-    def __init__(self, model: Any, path: Path | None = None) -> None:
+    def __init__(self, model: BaseAlgorithm, path: Path | None = None) -> None:
         self.model = model
         self.path = path
 
@@ -166,19 +171,23 @@ class SB3Agent:
         return np.asarray(action, dtype=np.float32)
 
 
+#: Restarts of the IK reference's inverse-kinematics solve (see :class:`~armreach_core.ik.IKPolicy`).
+IK_RESTARTS = 16
+
+
 class IKAgent:
-    """Damped-least-squares inverse kinematics from the URDF model (no learning)."""
+    """Inverse kinematics from the URDF model (no learning): a planned joint-space move, then DLS."""
 
     def __init__(self, damping: float = 0.05) -> None:
         self.damping = damping
         self._policy: IKPolicy | None = None
 
     def describe(self) -> str:
-        return f"damped-least-squares IK (damping {self.damping})"
+        return f"IK with {IK_RESTARTS} restarts, then damped least squares (damping {self.damping})"
 
     def act(self, obs: Any, env: ArmEnv) -> npt.NDArray[np.float32]:
         if self._policy is None or self._policy.robot is not env.robot:
-            self._policy = IKPolicy(env.robot, env.max_joint_step, damping=self.damping)
+            self._policy = IKPolicy(env.robot, env.max_joint_step, damping=self.damping, restarts=IK_RESTARTS)
         target = getattr(env.task, "target", None)
         if target is None:
             raise ConfigError(f"the IK controller needs a task with a target position; {env.task_name!r} has none")

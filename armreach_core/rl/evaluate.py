@@ -9,6 +9,7 @@ difference of joint angles at the control rate, over successful episodes).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import time
 import warnings
 from collections.abc import Callable
@@ -23,6 +24,7 @@ from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
 from armreach_core.rl.agents import Agent, IKAgent, SB3Agent, algo_class, env_kwargs
+from armreach_core.rl.config import RunConfig
 from armreach_core.rl.metrics import MeanStd, jerk, mean_jerk, steps_to_goal
 
 
@@ -41,8 +43,8 @@ class Episode:
 
 
 @dataclass
-class Evaluation:
-    """All episodes of one evaluation, plus the jerk trace used for the jerk-over-time figure."""
+class EvaluationResult:
+    """All episodes of one evaluation of a controller, plus the jerk trace of the jerk-over-time figure."""
 
     backend: str
     episodes: list[Episode]
@@ -80,7 +82,7 @@ def run_episodes(
     seed: int = 10_000,
     *,
     on_frame: Callable[[int, ArmEnv], None] | None = None,
-) -> Evaluation:
+) -> EvaluationResult:
     """Run ``episodes`` seeded episodes of ``agent`` and record them."""
     if episodes < 1:
         raise ConfigError(f"episodes must be >= 1, got {episodes}")
@@ -115,7 +117,7 @@ def run_episodes(
             )
     finally:
         env.close()
-    return Evaluation(env.backend_name, records, dt, _average_trace(traces), time.perf_counter() - t0)
+    return EvaluationResult(env.backend_name, records, dt, _average_trace(traces), time.perf_counter() - t0)
 
 
 def _average_trace(traces: list[npt.NDArray[np.float64]]) -> npt.NDArray[np.float64]:
@@ -131,15 +133,15 @@ def _average_trace(traces: list[npt.NDArray[np.float64]]) -> npt.NDArray[np.floa
     return np.asarray(total / np.maximum(count, 1), dtype=np.float64)
 
 
-def load_agent(run_dir: Path, config: dict[str, Any], backend: str | None = None, *, trust: bool = False) -> Agent:
+def load_agent(run_dir: Path, config: RunConfig, backend: str | None = None, *, trust: bool = False) -> Agent:
     """The run's controller: its final model (else its latest checkpoint), or the IK reference.
 
     Raises:
         ConfigError: no model, a damaged one, or a run folder not safe to unpickle from
             (see :func:`armreach_core.rl.runs.check_trusted`; ``trust`` skips that check).
     """
-    if config["algo"] == "ik":
-        return IKAgent(float(config["settings"].get("damping", 0.05)))
+    if not config.learns:
+        return IKAgent(float(config.settings.get("damping", 0.05)))
     runs.check_trusted(run_dir, trust=trust)
     model_path, checkpoint = run_dir / runs.MODEL, run_dir / runs.CHECKPOINT
     if model_path.is_file() and checkpoint.is_file() and checkpoint.stat().st_mtime > model_path.stat().st_mtime + 1:
@@ -151,9 +153,9 @@ def load_agent(run_dir: Path, config: dict[str, Any], backend: str | None = None
     for path in (model_path, checkpoint):
         if path.is_file():
             # HER models need an env with the goal spaces to load; a policy needs nothing else.
-            env = ArmEnv(**env_kwargs(config, backend=backend)) if "her" in config["settings"] else None
+            env = ArmEnv(**env_kwargs(config, backend=backend)) if config.uses_her else None
             try:
-                return SB3Agent(algo_class(config["algo"]).load(path, env=env, device="cpu"), path)
+                return SB3Agent(algo_class(config.algo).load(path, env=env, device="cpu"), path)
             except Exception as exc:
                 raise ConfigError(f"cannot load {path}: {exc}; the file is damaged or not an SB3 model") from exc
             finally:
@@ -174,14 +176,16 @@ def evaluate_run(
     seed: int = 10_000,
     max_episode_steps: int | None = None,
     trust: bool = False,
-) -> Evaluation:
+) -> EvaluationResult:
     """Evaluate a run folder on the paper's task (2048-step limit), optionally on another backend.
 
     ``trust`` loads the model even from a folder another user owns or may write to.
     """
     config = runs.read_config(run_dir)
     if max_episode_steps is not None:
-        config["eval_max_episode_steps"] = max_episode_steps
+        if max_episode_steps < 1:
+            raise ConfigError(f"--max-episode-steps must be positive, got {max_episode_steps}")
+        config = dataclasses.replace(config, eval_max_episode_steps=max_episode_steps)
     agent = load_agent(run_dir, config, backend, trust=trust)
     kwargs = env_kwargs(config, backend=backend, evaluation=True)
     evaluation = run_episodes(lambda: ArmEnv(**kwargs), agent, episodes, seed)
@@ -189,7 +193,7 @@ def evaluate_run(
     return evaluation
 
 
-def save_evaluation(evaluation: Evaluation, out: Path) -> dict[str, Any]:
+def save_evaluation(evaluation: EvaluationResult, out: Path) -> dict[str, Any]:
     """Write ``summary.json``, ``episodes.csv`` and ``jerk_trace.csv`` into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     summary = evaluation.summary()

@@ -1,8 +1,9 @@
 """``armreach experiment paper``: train and evaluate the paper's agents over seeds and report.
 
-Each (agent, seed) is an ordinary run folder under the experiment folder, so a finished
-run is reused when the experiment is started again (an interrupted one is resumed),
-and every number in ``report.md`` can be traced to a run.
+The experiment compares contenders (agents: an algorithm with a preset). Each contender
+and seed is an ordinary run folder under the experiment folder, so a finished run is
+reused when the experiment is started again (an interrupted one is resumed), and every
+number in ``report.md`` can be traced to a run.
 """
 
 from __future__ import annotations
@@ -17,18 +18,14 @@ from typing import Any, TextIO
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.defaults import DEFAULT_BACKEND
 from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
-from armreach_core.rl.evaluate import Evaluation, evaluate_run, save_evaluation
+from armreach_core.rl.checkpoints import read_progress
+from armreach_core.rl.config import RunConfig, config_mismatch, default_algo, extend, resolve_config
+from armreach_core.rl.evaluate import EvaluationResult, evaluate_run, save_evaluation
 from armreach_core.rl.metrics import MeanStd, convergence_episode, moving_average
-from armreach_core.rl.train import (
-    config_mismatch,
-    default_algo,
-    extend,
-    read_progress,
-    resolve_config,
-    train,
-)
+from armreach_core.rl.train import train
 
 #: The paper's numbers (Tables 2-4): PPO and DDPG, 614,400 steps, 100 evaluation episodes.
 PAPER = {
@@ -39,8 +36,8 @@ REWARD_WINDOW = 10
 
 
 @dataclass(frozen=True)
-class Arm:
-    """One agent of the experiment."""
+class Contender:
+    """One agent the experiment compares: an algorithm with a preset (trained once per seed)."""
 
     label: str
     algo: str
@@ -50,8 +47,10 @@ class Arm:
 
 
 @dataclass
-class ArmResult:
-    arm: Arm
+class ContenderResult:
+    """A contender's runs over the seeds: training curves, evaluation summaries, where they are."""
+
+    contender: Contender
     seeds: list[int] = field(default_factory=list)
     episode_rewards: list[npt.NDArray[np.float64]] = field(default_factory=list)
     summaries: list[dict[str, Any]] = field(default_factory=list)
@@ -75,17 +74,17 @@ class ArmResult:
         return MeanStd.of([s[key] * scale for s in self.summaries])
 
 
-def paper_arms(steps: int | dict[str, int] | None, fast: bool) -> list[Arm]:
+def paper_contenders(steps: int | dict[str, int] | None, fast: bool) -> list[Contender]:
     """PPO and DDPG with the paper preset (``steps``: one total, or per algorithm), plus the fast agent."""
     per_algo = steps if isinstance(steps, dict) else {"ppo": steps, "ddpg": steps}
-    arms = [
-        Arm("PPO", "ppo", "paper", steps=per_algo.get("ppo")),
-        Arm("DDPG", "ddpg", "paper", steps=per_algo.get("ddpg")),
+    contenders = [
+        Contender("PPO", "ppo", "paper", steps=per_algo.get("ppo")),
+        Contender("DDPG", "ddpg", "paper", steps=per_algo.get("ddpg")),
     ]
     if fast:
         algo = default_algo("fast")
-        arms.append(Arm(f"{algo.upper()} (fast preset)", algo, "fast"))
-    return arms
+        contenders.append(Contender(f"{algo.upper()} (fast preset)", algo, "fast"))
+    return contenders
 
 
 def episode_rewards(run_dir: Path) -> npt.NDArray[np.float64]:
@@ -103,7 +102,7 @@ def episode_rewards(run_dir: Path) -> npt.NDArray[np.float64]:
     return np.asarray([r for _, r in rows], dtype=np.float64)
 
 
-def _plan(run_dir: Path, config: dict[str, Any]) -> tuple[dict[str, Any], str]:
+def _plan(run_dir: Path, config: RunConfig) -> tuple[RunConfig, str]:
     """What to do with an experiment's run folder: train, resume, extend or reuse it.
 
     A folder is reused only when its settings are the ones asked for; a shorter run with
@@ -116,16 +115,16 @@ def _plan(run_dir: Path, config: dict[str, Any]) -> tuple[dict[str, Any], str]:
         return config, "training"
     stored = runs.read_config(run_dir)
     differences = config_mismatch(stored, config)
-    only_longer = differences == [d for d in differences if d.startswith("timesteps:")] and int(
-        stored["timesteps"]
-    ) < int(config["timesteps"])
+    only_longer = (
+        differences == [d for d in differences if d.startswith("timesteps:")] and stored.timesteps < config.timesteps
+    )
     if differences and not only_longer:
         raise ConfigError(
             f"{run_dir} holds a run with other settings ({'; '.join(differences)}); "
             "choose another --out, or delete that folder to train it again"
         )
     if only_longer:
-        return extend(stored, int(config["timesteps"])), "extending"
+        return extend(stored, config.timesteps), "extending"
     if (run_dir / runs.MODEL).is_file():
         return stored, "reusing"
     return stored, "resuming"
@@ -150,38 +149,38 @@ def _log(stream: TextIO | None, text: str) -> None:
 
 def run_experiment(
     out: Path,
-    arms: list[Arm],
+    contenders: list[Contender],
     *,
     seeds: int = 1,
     episodes: int = 100,
-    backend: str = "pybullet",
+    backend: str = DEFAULT_BACKEND,
     stream: TextIO | None = sys.stderr,
     eval_max_episode_steps: int = 2048,
     command: list[str] | None = None,
-) -> tuple[list[ArmResult], Evaluation]:
-    """Train and evaluate every arm for every seed (reusing finished runs), then the IK reference."""
+) -> tuple[list[ContenderResult], EvaluationResult]:
+    """Train and evaluate every contender for every seed (reusing finished runs), then the IK reference."""
     if seeds < 1:
         raise ConfigError(f"--seeds must be >= 1, got {seeds}")
     if episodes < 1:
         raise ConfigError(f"--episodes must be >= 1, got {episodes}")
     out.mkdir(parents=True, exist_ok=True)
     results = []
-    for arm in arms:
-        result = ArmResult(arm)
+    for contender in contenders:
+        result = ContenderResult(contender)
         for seed in range(seeds):
             config = resolve_config(
-                algo=arm.algo,
-                preset=arm.preset,
+                algo=contender.algo,
+                preset=contender.preset,
                 backend=backend,
-                steps=arm.steps,
+                steps=contender.steps,
                 seed=seed,
-                her=arm.her,
+                her=contender.her,
                 eval_max_episode_steps=eval_max_episode_steps,
             )
-            run_dir = out / f"{arm.algo}{'-her' if arm.her else ''}-{config['preset']}-s{seed}"
+            run_dir = out / f"{contender.algo}{'-her' if contender.her else ''}-{config.preset}-s{seed}"
             t0 = time.perf_counter()
             config, action = _plan(run_dir, config)
-            _log(stream, f"{action} {arm.label}, seed {seed}: {run_dir}")
+            _log(stream, f"{action} {contender.label}, seed {seed}: {run_dir}")
             if action != "reusing":
                 trained = train(config, run_dir, resume=action != "training", stream=stream, command=command)
                 if trained.interrupted:
@@ -196,13 +195,13 @@ def run_experiment(
             result.summaries.append(summary)
             result.jerk_traces.append(evaluation.jerk_trace)
             result.control_dt = evaluation.control_dt
-            result.timesteps.append(int(runs.read_config(run_dir)["timesteps"]))
+            result.timesteps.append(runs.read_config(run_dir).timesteps)
         results.append(result)
     ik_dir = runs.new_run_dir(out / "ik")  # nothing to train: always written afresh
     ik_config = resolve_config(
         algo="ik", preset="paper", backend=backend, eval_max_episode_steps=eval_max_episode_steps
     )
-    runs.write_yaml(ik_dir / runs.CONFIG, ik_config)
+    runs.write_config(ik_dir, ik_config)
     ik = evaluate_run(ik_dir, episodes=episodes, backend=backend)
     save_evaluation(ik, ik_dir / f"eval-{backend}")
     return results, ik

@@ -75,6 +75,21 @@ def _int_list(key: str, value: Any) -> list[int]:
     return [int(v) for v in value]
 
 
+def _float_list(length: int | None) -> Check:
+    def check(key: str, value: Any) -> list[float]:
+        numbers = (
+            isinstance(value, list)
+            and bool(value)
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+        )
+        if not numbers or (length is not None and len(value) != length):
+            size = f"{length} " if length is not None else ""
+            raise ConfigError(f"{key}: expected a list of {size}finite numbers, got {value!r}")
+        return [float(v) for v in value]
+
+    return check
+
+
 def _section(schema: Mapping[str, Any]) -> Check:
     def check(key: str, value: Any) -> Any:
         return _validate(value, schema, key)
@@ -89,6 +104,10 @@ ENV_SCHEMA: dict[str, Check] = {
     "success_threshold": _num(float, 0.0, lo_open=True),
     "distance_exponent": _num(float, 0.0, lo_open=True),
     "substeps": _num(int, 1),
+    # where the arm starts and sits (see "Bring your own arm" in the README)
+    "home": _float_list(None),
+    "base_position": _float_list(3),
+    "base_orientation": _float_list(4),
 }
 POLICY_SCHEMA: dict[str, Check] = {"net_arch": _int_list, "activation": _choice("relu", "tanh")}
 NOISE_SCHEMA: dict[str, Check] = {
@@ -132,6 +151,13 @@ for _name in OFF_POLICY:
         "noise": _section(NOISE_SCHEMA),
         "her": _section(HER_SCHEMA),
     }
+
+
+def validate_settings(algo: str, settings: Mapping[str, Any], where: str) -> dict[str, Any]:
+    """``settings`` of ``algo`` checked against the preset schema (ConfigError naming ``where.key``)."""
+    if algo not in ALGO_SCHEMAS:
+        raise ConfigError(f"{where}: unknown algorithm {algo!r}; use one of {list(ALGOS)}")
+    return _validate(dict(settings), ALGO_SCHEMAS[algo], where)
 
 
 def _validate(data: Any, schema: Mapping[str, Check], where: str) -> dict[str, Any]:

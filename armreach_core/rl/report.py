@@ -12,8 +12,8 @@ import numpy.typing as npt
 from armreach_core.env import ArmEnv
 from armreach_core.rl import runs
 from armreach_core.rl.agents import Agent, env_kwargs
-from armreach_core.rl.evaluate import Evaluation, load_agent, run_episodes
-from armreach_core.rl.experiment import PAPER, REWARD_WINDOW, ArmResult
+from armreach_core.rl.evaluate import EvaluationResult, load_agent, run_episodes
+from armreach_core.rl.experiment import PAPER, REWARD_WINDOW, ContenderResult
 from armreach_core.rl.metrics import MeanStd, moving_average
 
 
@@ -31,7 +31,7 @@ def _pct(stat: MeanStd) -> str:
 
 
 def write_report(
-    out: Path, results: list[ArmResult], ik: Evaluation, *, episodes: int, backend: str, command: str
+    out: Path, results: list[ContenderResult], ik: EvaluationResult, *, episodes: int, backend: str, command: str
 ) -> Path:
     """Write ``report.md`` (and its figures) into ``out``; returns the report's path."""
     figures = write_figures(out, results, ik)
@@ -54,7 +54,8 @@ def write_report(
     ]
     for r in results:
         steps = ", ".join(f"{n:,}" for n in sorted(set(r.timesteps))) or "0"
-        lines.append(f"| {r.arm.label} | {r.arm.preset} | {steps} | {MeanStd.of(r.train_seconds).mean / 60:.1f} min |")
+        minutes = MeanStd.of(r.train_seconds).mean / 60
+        lines.append(f"| {r.contender.label} | {r.contender.preset} | {steps} | {minutes:.1f} min |")
     lines += [
         "",
         "The paper trained 614,400 steps (300 episodes of 2048 steps). Runs shorter than that are not the paper's "
@@ -75,8 +76,8 @@ def write_report(
         conv = r.convergence()
         conv_text = "not reached" if conv.n == 0 else f"{conv.fmt(0)} ({r.converged_runs()}/{len(r.seeds)} runs)"
         lines.append(
-            f"| {r.arm.label} | {_paper(r.arm.label, 'convergence')} | {conv_text} | "
-            f"{_paper(r.arm.label, 'final_reward')} | {r.final_reward().fmt(2)}{_dagger(r)} |"
+            f"| {r.contender.label} | {_paper(r.contender.label, 'convergence')} | {conv_text} | "
+            f"{_paper(r.contender.label, 'final_reward')} | {r.final_reward().fmt(2)}{_dagger(r)} |"
         )
     lines += [
         "",
@@ -87,8 +88,8 @@ def write_report(
     ]
     for r in results:
         lines.append(
-            f"| {r.arm.label} | {_paper(r.arm.label, 'success')} | {_pct(r.stat('success_rate', 100.0))} | "
-            f"{_paper(r.arm.label, 'steps')} | {_stg(r)} |"
+            f"| {r.contender.label} | {_paper(r.contender.label, 'success')} | {_pct(r.stat('success_rate', 100.0))} | "
+            f"{_paper(r.contender.label, 'steps')} | {_stg(r)} |"
         )
     lines.append(
         f"| DLS inverse kinematics (reference) | – | {100 * ik_summary['success_rate']:.0f} | – | "
@@ -107,9 +108,9 @@ def write_report(
     ]
     for r in results:
         lines.append(
-            f"| {r.arm.label} | {_paper(r.arm.label, 'success')} / {_pct(r.stat('success_rate', 100.0))} | "
-            f"{_paper(r.arm.label, 'final_reward')} / {r.final_reward().fmt(2)}{_dagger(r)} | "
-            f"{_paper(r.arm.label, 'jerk')} / {_jerk(r)} | {r.stat('final_reward_mean').fmt(2)} |"
+            f"| {r.contender.label} | {_paper(r.contender.label, 'success')} / {_pct(r.stat('success_rate', 100.0))} | "
+            f"{_paper(r.contender.label, 'final_reward')} / {r.final_reward().fmt(2)}{_dagger(r)} | "
+            f"{_paper(r.contender.label, 'jerk')} / {_jerk(r)} | {r.stat('final_reward_mean').fmt(2)} |"
         )
     lines.append(
         f"| DLS inverse kinematics (reference) | – / {100 * ik_summary['success_rate']:.0f} | – / – | "
@@ -122,28 +123,27 @@ def write_report(
     lines += ["## Runs", ""]
     for r in results:
         for seed, run_dir in zip(r.seeds, r.run_dirs, strict=True):
-            lines.append(f"- {r.arm.label}, seed {seed}: `{run_dir.relative_to(out)}`")
+            lines.append(f"- {r.contender.label}, seed {seed}: `{run_dir.relative_to(out)}`")
     lines.append("- DLS inverse kinematics: `ik`")
     path = out / "report.md"
     runs.atomic_write_text(path, "\n".join(lines) + "\n")
     return path
 
 
-def _dagger(r: ArmResult) -> str:
-    return "" if r.arm.preset == "paper" else " †"
+def _dagger(r: ContenderResult) -> str:
+    return "" if r.contender.preset == "paper" else " †"
 
 
 def _eval_limit(out: Path) -> int:
-    config = runs.read_config(out / "ik")
-    return int(config.get("eval_max_episode_steps", 2048))
+    return runs.read_config(out / "ik").eval_max_episode_steps
 
 
-def _stg(r: ArmResult) -> str:
+def _stg(r: ContenderResult) -> str:
     values = [s["steps_to_goal_mean"] for s in r.summaries if s["success_rate"] > 0]
     return MeanStd.of(values).fmt(0)
 
 
-def _jerk(r: ArmResult) -> str:
+def _jerk(r: ContenderResult) -> str:
     return MeanStd.of([s["jerk_mean"] for s in r.summaries if s["success_rate"] > 0]).fmt(2)
 
 
@@ -153,7 +153,7 @@ def _cpu_count() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
-def write_figures(out: Path, results: list[ArmResult], ik: Evaluation) -> list[tuple[str, str]]:
+def write_figures(out: Path, results: list[ContenderResult], ik: EvaluationResult) -> list[tuple[str, str]]:
     """Learning curves (Fig. 2), jerk over time (Fig. 4), a successful rollout (Fig. 3, PNG + GIF)."""
     import matplotlib
 
@@ -168,7 +168,7 @@ def write_figures(out: Path, results: list[ArmResult], ik: Evaluation) -> list[t
             continue
         n = min(c.size for c in curves)
         stack = np.stack([c[:n] for c in curves])
-        line = ax.plot(np.arange(n), stack.mean(axis=0), label=r.arm.label)[0]
+        line = ax.plot(np.arange(n), stack.mean(axis=0), label=r.contender.label)[0]
         if len(curves) > 1:
             ax.fill_between(np.arange(n), stack.min(axis=0), stack.max(axis=0), color=line.get_color(), alpha=0.2)
     ax.set_xlabel("training episode")
@@ -190,7 +190,7 @@ def write_figures(out: Path, results: list[ArmResult], ik: Evaluation) -> list[t
             padded = np.full((len(usable), n), np.nan)
             for i, t in enumerate(usable):
                 padded[i, : t.size] = t
-            traces.append((r.arm.label, np.nanmean(padded, axis=0), r.control_dt))
+            traces.append((r.contender.label, np.nanmean(padded, axis=0), r.control_dt))
     if ik.jerk_trace.size:
         traces.append(("DLS IK (reference)", ik.jerk_trace, ik.control_dt))
     for label, trace, dt in traces:
@@ -216,12 +216,12 @@ def write_figures(out: Path, results: list[ArmResult], ik: Evaluation) -> list[t
     return figures
 
 
-def _best_run(results: list[ArmResult]) -> tuple[str, Path] | None:
+def _best_run(results: list[ContenderResult]) -> tuple[str, Path] | None:
     best: tuple[float, str, Path] | None = None
     for r in results:
         for summary, run_dir in zip(r.summaries, r.run_dirs, strict=True):
             if summary["success_rate"] > 0 and (best is None or summary["success_rate"] > best[0]):
-                best = (summary["success_rate"], r.arm.label, run_dir)
+                best = (summary["success_rate"], r.contender.label, run_dir)
     return None if best is None else (best[1], best[2])
 
 

@@ -41,6 +41,7 @@ import yaml
 
 from armreach_core.errors import ConfigError
 from armreach_core.plugins import get_host
+from armreach_core.rl.config import RunConfig
 
 CONFIG = "config.yaml"
 COMMAND = "command.txt"
@@ -166,8 +167,17 @@ def write_yaml(path: str | os.PathLike[str], data: dict[str, Any]) -> None:
     atomic_write_text(path, yaml.safe_dump(data, sort_keys=False))
 
 
-def read_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
-    """The resolved config of a run, with a clear error when the folder is not a run."""
+def write_config(run_dir: str | os.PathLike[str], config: RunConfig) -> None:
+    """Write ``config.yaml`` (atomically)."""
+    write_yaml(Path(run_dir) / CONFIG, config.to_dict())
+
+
+def read_config(run_dir: str | os.PathLike[str]) -> RunConfig:
+    """The resolved config of a run, with a clear error when the folder is not a run.
+
+    Any ``config.yaml`` written since the first version reads back; see
+    :mod:`armreach_core.rl.config` for what is required and what happens to unknown keys.
+    """
     path = Path(run_dir) / CONFIG
     if not path.is_file():
         raise ConfigError(f"{run_dir} is not a run folder: {CONFIG} is missing (create one with `armreach train`)")
@@ -175,19 +185,42 @@ def read_config(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path} is not valid YAML: {exc}") from None
-    if not isinstance(data, dict) or "algo" not in data:
-        raise ConfigError(f"{path} is not an armreach run config")
-    return data
+    return RunConfig.from_dict(data, source=str(path))
+
+
+#: Packages every result depends on, whatever the plugins; the plugins' own distributions and
+#: what they require (their engines) are added by :func:`versions`.
+CORE_PACKAGES = ("armreach", "stable-baselines3", "torch", "gymnasium", "numpy")
 
 
 def versions() -> dict[str, str]:
-    """Versions of the packages a result depends on."""
+    """Versions of the packages a result depends on: the core's, each loaded plugin's and its requirements'."""
     out = {"python": platform.python_version(), "platform": platform.platform()}
-    for dist in ("armreach", "armreach-pybullet", "armreach-mujoco", "stable-baselines3", "torch", "gymnasium",
-                 "numpy", "pybullet", "mujoco"):  # fmt: skip
+    names = list(CORE_PACKAGES)
+    for plugin in get_host().plugins():
+        if plugin.distribution:
+            names.append(plugin.distribution)
+            names += _requirement_names(plugin.distribution)
+    for dist in dict.fromkeys(names):
         with contextlib.suppress(metadata.PackageNotFoundError):
             out[dist] = metadata.version(dist)
     return out
+
+
+def _requirement_names(distribution: str) -> list[str]:
+    """Names of what ``distribution`` requires unconditionally (no extras, no environment markers)."""
+    try:
+        requirements = metadata.requires(distribution) or []
+    except metadata.PackageNotFoundError:
+        return []
+    names = []
+    for requirement in requirements:
+        if ";" in requirement:  # an extra's or a platform's requirement
+            continue
+        match = re.match(r"[A-Za-z0-9][A-Za-z0-9._-]*", requirement.strip())
+        if match:
+            names.append(match.group(0))
+    return names
 
 
 def environment_record() -> dict[str, Any]:

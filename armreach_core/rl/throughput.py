@@ -13,24 +13,28 @@ def bench_sb3(
 
     ``threads``: torch CPU threads; default what ``armreach train`` uses (see
     :func:`armreach_core.rl.train.configure_threads`). ``settings``: preset values to
-    change, e.g. ``{"train_freq": 4, "gradient_steps": 1}``.
+    change, e.g. ``{"train_freq": 4, "gradient_steps": 1}`` (checked like a preset's).
     """
     import tempfile
     from pathlib import Path
 
+    from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+
     from armreach_core.rl.agents import build_model, make_vec_env
-    from armreach_core.rl.train import configure_threads, resolve_config
+    from armreach_core.rl.config import resolve_config
+    from armreach_core.rl.train import configure_threads
 
     config = resolve_config(algo=algo, preset="paper", backend=backend)
-    config["settings"].update(settings or {})
+    config = config.with_settings(**(settings or {}))
     if threads is not None:
-        config["settings"]["torch_threads"] = threads
-    configure_threads(config["settings"], "cpu")
+        config = config.with_settings(torch_threads=threads)
+    configure_threads(config.torch_threads, "cpu")
     with tempfile.TemporaryDirectory() as tmp:
         env = make_vec_env(config, Path(tmp), 0, 1, append=False)
         try:
-            model = build_model(algo, config["settings"], env, 0, None, "cpu")
-            warm = 2048 if algo == "ppo" else int(model.learning_starts) + 50
+            model = build_model(algo, config.settings, env, 0, None, "cpu")
+            # Past the start: PPO's first rollout, an off-policy algorithm's first updates.
+            warm = model.learning_starts + 50 if isinstance(model, OffPolicyAlgorithm) else 2048
             model.learn(warm)
             t0 = time.perf_counter()
             model.learn(steps, reset_num_timesteps=False)

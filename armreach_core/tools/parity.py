@@ -25,7 +25,7 @@ import dataclasses
 import math
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -256,6 +256,7 @@ def run_parity(
     configs: int = 1000,
     seed: int = 0,
     tolerances: Tolerances | None = None,
+    env_kwargs: Mapping[str, Any] | None = None,
 ) -> ParityReport:
     """Measure kinematic and dynamic parity and speed of ``backends`` (the first is the reference).
 
@@ -268,6 +269,7 @@ def run_parity(
         configs: random configurations for the kinematic check.
         seed: seeds the configurations, the random actions and the scripted targets.
         tolerances: what counts as parity.
+        env_kwargs: more env arguments (``home``, ``base_position``, ...).
 
     Raises:
         BackendUnavailableError: a backend is not installed (the message says how to install it).
@@ -284,7 +286,7 @@ def run_parity(
     envs: dict[str, ArmEnv] = {}
     try:
         for name in names:
-            envs[name] = ArmEnv(DEFAULT_TASK, backend=name, urdf=urdf, ee_link=ee_link)
+            envs[name] = ArmEnv(DEFAULT_TASK, backend=name, urdf=urdf, ee_link=ee_link, **dict(env_kwargs or {}))
         first = envs[names[0]]
         robot = first.robot
         report = ParityReport(

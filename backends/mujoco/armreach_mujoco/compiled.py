@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import hashlib
 import threading
+import warnings
 from collections import OrderedDict
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
@@ -23,12 +24,19 @@ from armreach_core.backend import PhysicsConfig
 from armreach_core.errors import URDFError
 from armreach_core.robot import RobotModel
 from armreach_mujoco import servo, world
+from armreach_mujoco.engine import log
 from armreach_mujoco.urdf_import import spec_from_urdf
 from armreach_mujoco.world import Extras
 
 MODEL_CACHE_SIZE = 32
 
 Index = npt.NDArray[np.intp]
+
+
+def _index(values: list[int]) -> Index:
+    array = np.array(values, dtype=np.intp)
+    array.flags.writeable = False
+    return array
 
 
 @dataclass(frozen=True)
@@ -42,6 +50,9 @@ class CompiledModel:
         bodies: MuJoCo body id by MuJoCo body name (URDF links keep their names).
         mocap: mocap index of each marker, by marker name.
         free: ``(qpos address, dof address)`` of each free box's joint, by box name.
+        held_qpos, held_qvel: addresses of ``robot.held_joints`` in ``qpos`` and ``qvel``.
+        held_servos: indices in ``robot.held_joints`` of those held by a servo (the others
+            follow their master through a joint equality); held_actuators: their actuators.
     """
 
     model: Any
@@ -51,16 +62,14 @@ class CompiledModel:
     bodies: Mapping[str, int]
     mocap: Mapping[str, int]
     free: Mapping[str, tuple[int, int]]
+    held_qpos: Index = field(default_factory=lambda: _index([]))
+    held_qvel: Index = field(default_factory=lambda: _index([]))
+    held_servos: Index = field(default_factory=lambda: _index([]))
+    held_actuators: Index = field(default_factory=lambda: _index([]))
 
 
 _cache: OrderedDict[tuple[Any, ...], CompiledModel] = OrderedDict()
 _cache_lock = threading.Lock()
-
-
-def _index(values: list[int]) -> Index:
-    array = np.array(values, dtype=np.intp)
-    array.flags.writeable = False
-    return array
 
 
 def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> CompiledModel:
@@ -71,16 +80,33 @@ def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> Compiled
     servo.add_servos(spec, robot)
     world.add_scene(spec, physics, extras)
     try:
-        model = spec.compile()
+        with warnings.catch_warnings(record=True) as caught:  # a mesh's missing texture coordinates...
+            warnings.simplefilter("always")
+            model = spec.compile()
     except ValueError as exc:  # e.g. an inertia MuJoCo rejects; the message names the body
         raise URDFError(
             f"MuJoCo cannot compile {robot.urdf_path}: {' '.join(str(exc).split())}; fix the element it names"
         ) from None
+    for warning in caught:  # ...go where MuJoCo's other warnings go (armreach_mujoco.engine)
+        log.warning("mujoco: compiling %s: %s", robot.urdf_path, warning.message)
     names = robot.joint_names
     qpos = _index([int(model.jnt_qposadr[model.joint(n).id]) for n in names])
     qvel = _index([int(model.jnt_dofadr[model.joint(n).id]) for n in names])
     actuators = _index([int(model.actuator(n).id) for n in names])
-    servo.set_gains(model, qpos, qvel, actuators, robot.home)
+    held = [j.name for j in robot.held_joints]
+    held_qpos = _index([int(model.jnt_qposadr[model.joint(n).id]) for n in held])
+    held_qvel = _index([int(model.jnt_dofadr[model.joint(n).id]) for n in held])
+    held_servos = _index(servo.servoed_held(robot))
+    held_actuators = _index([int(model.actuator(held[i]).id) for i in held_servos])
+    held_home = robot.held_positions(robot.home)
+    servo.set_gains(
+        model,
+        np.concatenate((qpos, held_qpos[held_servos])),
+        np.concatenate((qvel, held_qvel[held_servos])),
+        np.concatenate((actuators, held_actuators)),
+        np.concatenate((robot.home, held_home[held_servos])),
+        (held_qpos, held_home),
+    )
 
     bodies = {model.body(i).name: i for i in range(model.nbody)}
     mocap = {m.name: int(model.body_mocapid[bodies[world.MARKER_PREFIX + m.name]]) for m in extras.markers}
@@ -97,11 +123,15 @@ def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> Compiled
         bodies=MappingProxyType(bodies),
         mocap=MappingProxyType(mocap),
         free=MappingProxyType(free),
+        held_qpos=held_qpos,
+        held_qvel=held_qvel,
+        held_servos=held_servos,
+        held_actuators=held_actuators,
     )
 
 
 def compiled_model(robot: RobotModel, physics: PhysicsConfig, extras: Extras | None = None) -> CompiledModel:
-    """The compiled model for ``robot``, cached per (URDF file, mtime, content, home, joints, physics, extras).
+    """The compiled model for ``robot``, cached per (URDF, mtime, content, home, joints, base pose, physics, extras).
 
     The gains and other constants of this package are not part of the key: after changing
     one (when tuning), call :func:`clear_cache`.
@@ -117,6 +147,8 @@ def compiled_model(robot: RobotModel, physics: PhysicsConfig, extras: Extras | N
         hashlib.sha1(robot.parsed.resolved_xml).hexdigest(),
         tuple(robot.home.tolist()),
         robot.joint_names,
+        robot.base_position,
+        robot.base_orientation,
         physics,
         extras,
     )

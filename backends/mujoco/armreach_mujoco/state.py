@@ -31,6 +31,8 @@ class StateIO:
         self.data = data
         self._qpos, self._qvel, self._act = compiled.qpos, compiled.qvel, compiled.actuators
         self._ee = compiled.bodies[robot.ee_link]
+        self._held = len(robot.held_joints) > 0
+        self._held_targets = np.array([robot.held_joints[i].position for i in compiled.held_servos])
         self._has_free = bool(compiled.free)
         # MjData's arrays, fetched once (each attribute access costs a binding call)
         self._ctrl, self._qpos_all, self._qvel_all, self._xpos = data.ctrl, data.qpos, data.qvel, data.xpos
@@ -40,7 +42,15 @@ class StateIO:
         """The arm at home, holding it."""
         self._qpos_all[self._qpos] = self.robot.home
         self._ctrl[self._act] = self.robot.home
+        self._hold(self.robot.home)
         mujoco.mj_forward(self.model, self.data)
+
+    def _hold(self, q: FloatArray) -> None:
+        """Held joints (fingers...) where they belong when the arm is at ``q``, their servos holding them."""
+        if self._held:
+            compiled = self.compiled
+            self.data.qpos[compiled.held_qpos] = self.robot.held_positions(q)
+            self.data.ctrl[compiled.held_actuators] = self._held_targets
 
     def carry_over(self, old: StateIO) -> None:
         """Take the arm's, the boxes' and the markers' state from ``old`` (another model of the same robot)."""
@@ -48,6 +58,9 @@ class StateIO:
         data.qpos[self._qpos] = old.data.qpos[before.qpos]
         data.qvel[self._qvel] = old.data.qvel[before.qvel]
         data.ctrl[self._act] = old.data.ctrl[before.actuators]
+        data.qpos[self.compiled.held_qpos] = old.data.qpos[before.held_qpos]
+        data.qvel[self.compiled.held_qvel] = old.data.qvel[before.held_qvel]
+        data.ctrl[self.compiled.held_actuators] = old.data.ctrl[before.held_actuators]
         data.time = old.data.time
         for name, (qadr, vadr) in self.compiled.free.items():
             if name in before.free:
@@ -67,6 +80,7 @@ class StateIO:
         data.qvel[:] = 0.0
         data.qacc_warmstart[:] = 0.0
         data.ctrl[self._act] = values
+        self._hold(values)
         mujoco.mj_forward(self.model, data)
 
     def set_joint_targets(self, q: FloatArray) -> None:
@@ -99,6 +113,8 @@ class StateIO:
         return ArmState(q, qd, self._xpos[self._ee].copy(), objects)
 
     def link_position(self, link: str) -> FloatArray:
+        if link == self.robot.root_link:  # a root called "world" is MuJoCo's own world body, at the origin
+            return np.array(self.robot.base_position, dtype=np.float64)
         try:
             index = self.compiled.bodies[link]
         except KeyError:

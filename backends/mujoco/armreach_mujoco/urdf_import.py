@@ -5,7 +5,7 @@ block (``strippath=false``, ``discardvisual=false``, ``fusestatic=false``, so ev
 ``tool0`` included, is a body whose frame is the link frame). Meshes MuJoCo cannot read
 (``.dae``, ``.ply``...) are converted once to ``.obj`` with trimesh into a cache folder.
 Links that move but have no ``<inertial>`` get PyBullet's default inertial (see
-:func:`spec_from_urdf`).
+:func:`spec_from_urdf`). The robot is placed at its base pose (:func:`place_base`).
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from lxml import etree
 
 from armreach_core.errors import URDFError
@@ -127,4 +128,22 @@ def spec_from_urdf(robot: RobotModel) -> Any:
             body.inertia = [1.0, 1.0, 1.0]
             body.ipos = [0.0, 0.0, 0.0]
             body.iquat = [1.0, 0.0, 0.0, 0.0]
+    place_base(spec, robot)
     return spec
+
+
+def place_base(spec: Any, robot: RobotModel) -> None:
+    """Move what the URDF put in the world (the root link's body, or, when the root link is
+    called ``world`` and MuJoCo merged it into its own world, that link's children and
+    geoms) to the robot's base pose. Call before anything else is added to the world."""
+    if robot.base_position == (0.0, 0.0, 0.0) and robot.base_orientation == (1.0, 0.0, 0.0, 0.0):
+        return
+    position = np.asarray(robot.base_position, dtype=np.float64)
+    rotation = np.asarray(robot.base_orientation, dtype=np.float64)
+    world = spec.worldbody
+    for element in (*world.bodies, *world.geoms, *world.sites):
+        pos, quat = np.zeros(3), np.zeros(4)
+        mujoco.mju_rotVecQuat(pos, np.asarray(element.pos, dtype=np.float64), rotation)
+        mujoco.mju_mulQuat(quat, rotation, np.asarray(element.quat, dtype=np.float64))
+        element.pos = (pos + position).tolist()
+        element.quat = quat.tolist()

@@ -3,6 +3,13 @@
 Position control uses PyBullet's own motor (``POSITION_CONTROL``) with
 ``positionGain`` :data:`POSITION_GAIN`, ``velocityGain`` :data:`VELOCITY_GAIN` and each
 joint's URDF effort limit as the maximum force. Joint damping comes from the URDF.
+
+The robot's root link is placed at the robot's base pose. Joints the arm does not actuate
+(``robot.held_joints``: fingers...) are reset with the arm and held by the same motor; a
+mimic joint whose master is actuated gets its master's position, times the multiplier plus
+the offset, as its target before every physics step. A reset thus leaves nothing of earlier
+episodes in the robot's state (Bullet does not warm-start a multibody's contacts: measured,
+an arm reset while lying on the ground steps identically whatever came before).
 """
 
 from __future__ import annotations
@@ -115,13 +122,23 @@ class PyBulletBackend(Backend):
             flags |= pb.URDF_USE_INERTIA_FROM_FILE
         if physics.self_collision:
             flags |= pb.URDF_USE_SELF_COLLISION | pb.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT
+        robot = self.robot
+        w, x, y, z = robot.base_orientation
+        self._base_pose = (list(robot.base_position), [x, y, z, w])  # PyBullet's quaternions are (x, y, z, w)
         with tempfile.TemporaryDirectory(prefix="armreach-") as tmp:
             path = os.path.join(tmp, "robot.urdf")
             with open(path, "wb") as handle:
-                handle.write(self.robot.parsed.resolved_xml)
+                handle.write(robot.parsed.resolved_xml)
             try:
                 with _engine_output_to_log():
-                    body = pb.loadURDF(path, useFixedBase=True, flags=flags, physicsClientId=cid)
+                    body = pb.loadURDF(
+                        path,
+                        basePosition=self._base_pose[0],
+                        baseOrientation=self._base_pose[1],
+                        useFixedBase=True,
+                        flags=flags,
+                        physicsClientId=cid,
+                    )
             except pb.error as exc:
                 pb.disconnect(physicsClientId=cid)
                 raise URDFError(_load_failure(self.robot, str(exc))) from None
@@ -135,14 +152,25 @@ class PyBulletBackend(Backend):
             info = pb.getJointInfo(body, i, physicsClientId=cid)
             joint_index[info[1].decode()] = i
             self._link_index[info[12].decode()] = i
-        missing = [name for name in self.robot.joint_names if name not in joint_index]
+        held = robot.held_joints
+        missing = [name for name in (*robot.joint_names, *(j.name for j in held)) if name not in joint_index]
         if missing:
-            raise ArmReachError(f"PyBullet did not create joints {missing} of {self.robot.urdf_path}")
-        self._joints = [joint_index[name] for name in self.robot.joint_names]
-        self._ee = self._link_index[self.robot.ee_link]
-        self._forces = [j.effort for j in self.robot.joints]
-        self._kp = [POSITION_GAIN] * self.robot.dof
-        self._kd = [VELOCITY_GAIN] * self.robot.dof
+            raise ArmReachError(f"PyBullet did not create joints {missing} of {robot.urdf_path}")
+        self._joints = [joint_index[name] for name in robot.joint_names]
+        self._ee = self._link_index[robot.ee_link]
+        self._forces = [j.effort for j in robot.joints]
+        self._kp = [POSITION_GAIN] * robot.dof
+        self._kd = [VELOCITY_GAIN] * robot.dof
+        self._held = [joint_index[j.name] for j in held]
+        self._held_forces = [j.effort for j in held]
+        actuated = {name: i for i, name in enumerate(robot.joint_names)}
+        # mimic joints of actuated masters: (joint, master, multiplier, offset)
+        followers = [(joint_index[j.name], j.mimic) for j in held if j.mimic is not None and j.mimic.joint in actuated]
+        self._followers = [index for index, _ in followers]
+        self._masters = [self._joints[actuated[m.joint]] for _, m in followers if m is not None]
+        self._mimic_gain = np.array([m.multiplier for _, m in followers if m is not None])
+        self._mimic_offset = np.array([m.offset for _, m in followers if m is not None])
+        self._follower_forces = [self._held_forces[self._held.index(index)] for index in self._followers]
 
     # -- engine handles (for probes and tests; read-only) ---------------------------------
     @property
@@ -186,6 +214,20 @@ class PyBulletBackend(Backend):
         values = np.asarray(q, dtype=np.float64)
         for joint, value in zip(self._joints, values, strict=True):
             pb.resetJointState(body, joint, float(value), 0.0, physicsClientId=cid)
+        if self._held:
+            held = self.robot.held_positions(values)
+            for joint, value in zip(self._held, held, strict=True):
+                pb.resetJointState(body, joint, float(value), 0.0, physicsClientId=cid)
+            pb.setJointMotorControlArray(
+                body,
+                self._held,
+                pb.POSITION_CONTROL,
+                targetPositions=held.tolist(),
+                forces=self._held_forces,
+                positionGains=[POSITION_GAIN] * len(self._held),
+                velocityGains=[VELOCITY_GAIN] * len(self._held),
+                physicsClientId=cid,
+            )
         self.set_joint_targets(values)
 
     def set_joint_targets(self, q: FloatArray) -> None:
@@ -201,8 +243,27 @@ class PyBulletBackend(Backend):
         )
 
     def step(self) -> None:
+        if self._followers:
+            self._step_with_mimics()
+            return
         for _ in range(self.physics.substeps):
             pb.stepSimulation(physicsClientId=self._client)
+
+    def _step_with_mimics(self) -> None:
+        cid, body, n = self._client, self._body, len(self._followers)
+        for _ in range(self.physics.substeps):
+            masters = np.array([s[0] for s in pb.getJointStates(body, self._masters, physicsClientId=cid)])
+            pb.setJointMotorControlArray(
+                body,
+                self._followers,
+                pb.POSITION_CONTROL,
+                targetPositions=(self._mimic_gain * masters + self._mimic_offset).tolist(),
+                forces=self._follower_forces,
+                positionGains=[POSITION_GAIN] * n,
+                velocityGains=[VELOCITY_GAIN] * n,
+                physicsClientId=cid,
+            )
+            pb.stepSimulation(physicsClientId=cid)
 
     # -- state -------------------------------------------------------------------------
     def joint_state(self) -> tuple[FloatArray, FloatArray]:
@@ -220,8 +281,8 @@ class PyBulletBackend(Backend):
 
     def link_position(self, link: str) -> FloatArray:
         index = self.link_index(link)
-        if index < 0:
-            return np.array(pb.getBasePositionAndOrientation(self._body, physicsClientId=self._client)[0])
+        if index < 0:  # the root link's frame (PyBullet's base position is its centre of mass)
+            return np.array(self._base_pose[0], dtype=np.float64)
         state = pb.getLinkState(self._body, index, computeForwardKinematics=True, physicsClientId=self._client)
         return np.array(state[4])
 

@@ -32,7 +32,7 @@ from armreach_core.robot import FloatArray, RobotModel
 from armreach_core.task import Component, GoalArray, ObservationLayout, Scene, Task, goal_distance
 
 OBJECT, TABLE, GOAL_MARKER = "object", "table", "goal"
-#: The table: a fixed box whose top is at z = 5 cm (m, base frame).
+#: The table: a fixed box whose top is at z = 5 cm (m, world frame).
 TABLE_HALF_EXTENTS = (0.25, 0.35, 0.025)
 TABLE_CENTER = (0.5, 0.0, 0.025)
 TABLE_TOP = TABLE_CENTER[2] + TABLE_HALF_EXTENTS[2]

@@ -1,0 +1,405 @@
+"""Where an arm starts: a home pose chosen from the URDF model alone, and checks of a given one.
+
+The default home is the first configuration, in a deterministic order, that keeps every
+link's collision geometry above the ground, has no two non-neighbouring links overlapping
+and leaves the end effector away from singularities. The URDF's zero pose (moved inside
+the limits) comes first, so it is kept whenever it qualifies; then poses at growing
+distances from it. Nothing here is tuned to an arm: geometry, limits and kinematics come
+from the URDF, and the thresholds are relative to the arm's own size and Jacobian.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+from lxml import etree
+
+from armreach_core.errors import ConfigError, URDFError
+
+if TYPE_CHECKING:
+    from armreach_core.robot import RobotModel
+
+FloatArray = npt.NDArray[np.float64]
+
+log = logging.getLogger("armreach.home")
+
+#: How far above the ground every moving link must stay (m).
+GROUND_CLEARANCE = 0.01
+#: A home's smallest singular value of the position Jacobian, relative to the arm's typical one.
+MIN_DEXTERITY = 0.25
+#: Distances (in units of each joint's half range, at most π) of the candidates from the zero pose.
+RADII = (0.15, 0.3, 0.45, 0.6, 0.8, 1.0)
+#: Candidates per distance.
+DIRECTIONS = 96
+#: Points of a cylinder's rim per end.
+RIM = 12
+#: Mesh points kept per collision mesh (hull vertices, evenly thinned).
+MESH_POINTS = 256
+
+
+class BelowGroundError(URDFError):
+    """No pose near the zero pose keeps the arm above the ground; ``lift`` (m) would."""
+
+    def __init__(self, message: str, lift: float) -> None:
+        super().__init__(message)
+        self.lift = lift
+
+
+@dataclass(frozen=True)
+class _Joint:
+    name: str
+    kind: str
+    parent: str
+    child: str
+    origin: FloatArray
+    axis: FloatArray
+
+
+@dataclass(frozen=True)
+class _Geometry:
+    """Every link's collision points in its own frame, and the tree to place them."""
+
+    joints: tuple[_Joint, ...]  # in topological order
+    points: dict[str, FloatArray]  # link -> (k, 3), links with collision geometry only
+    grounded: frozenset[str]  # the root and links fixed to it: they may touch the ground
+    neighbours: frozenset[tuple[str, str]]  # link pairs that may touch (joined by a joint or a fixed chain)
+
+
+def _rpy(rpy: tuple[float, float, float]) -> FloatArray:
+    r, p, y = rpy
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def _origin(element: Any) -> FloatArray:
+    transform = np.eye(4)
+    origin = element.find("origin") if element is not None else None
+    if origin is not None:
+        xyz = [float(v) for v in (origin.get("xyz") or "0 0 0").split()]
+        rpy = [float(v) for v in (origin.get("rpy") or "0 0 0").split()]
+        transform[:3, :3] = _rpy((rpy[0], rpy[1], rpy[2]))
+        transform[:3, 3] = xyz
+    return transform
+
+
+@functools.lru_cache(maxsize=128)
+def _mesh_points(filename: str, scale: tuple[float, float, float]) -> FloatArray | None:
+    import trimesh
+
+    try:
+        mesh: Any = trimesh.load(filename, force="mesh")
+        vertices: FloatArray = np.asarray(mesh.convex_hull.vertices, dtype=np.float64)
+    except Exception as exc:  # a mesh trimesh cannot read: the link is checked by its frame alone
+        log.warning("could not read collision mesh %s (%s); its link is checked at its frame only", filename, exc)
+        return None
+    if len(vertices) > MESH_POINTS:
+        vertices = vertices[np.linspace(0, len(vertices) - 1, MESH_POINTS).astype(int)]
+    scaled: FloatArray = vertices * np.asarray(scale, dtype=np.float64)
+    return scaled
+
+
+def _shape_points(geometry: Any) -> FloatArray | None:
+    shape = geometry[0] if len(geometry) else None
+    if shape is None:
+        return None
+    if shape.tag == "box":
+        half = np.array([float(v) for v in shape.get("size", "0 0 0").split()]) / 2
+        corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64)
+        return corners * half
+    if shape.tag == "sphere":
+        r = float(shape.get("radius", "0"))
+        return np.vstack([np.eye(3) * r, -np.eye(3) * r])
+    if shape.tag == "cylinder":
+        r, length = float(shape.get("radius", "0")), float(shape.get("length", "0"))
+        angles = np.linspace(0, 2 * math.pi, RIM, endpoint=False)
+        rim = np.stack([r * np.cos(angles), r * np.sin(angles)], axis=1)
+        return np.vstack([np.column_stack([rim, np.full(RIM, z)]) for z in (-length / 2, length / 2)])
+    if shape.tag == "mesh":
+        scale = tuple(float(v) for v in (shape.get("scale") or "1 1 1").split())
+        return _mesh_points(shape.get("filename", ""), (scale[0], scale[1], scale[2]))
+    return None
+
+
+@functools.lru_cache(maxsize=32)
+def _geometry(resolved_xml: bytes) -> _Geometry:
+    root = etree.fromstring(resolved_xml)
+    joints: dict[str, _Joint] = {}
+    for element in root.iter("joint"):
+        if element.getparent() is not root:
+            continue
+        axis = element.find("axis")
+        vector = np.array([float(v) for v in ((axis.get("xyz") if axis is not None else None) or "1 0 0").split()])
+        parent, child = element.find("parent"), element.find("child")
+        joints[element.get("name", "")] = _Joint(
+            name=element.get("name", ""),
+            kind=element.get("type", "fixed"),
+            parent=parent.get("link", "") if parent is not None else "",
+            child=child.get("link", "") if child is not None else "",
+            origin=_origin(element),
+            axis=vector / max(float(np.linalg.norm(vector)), 1e-12),
+        )
+    children = {j.child for j in joints.values()}
+    links = [link.get("name", "") for link in root.iter("link") if link.getparent() is root]
+    base = next(name for name in links if name not in children)
+    order: list[_Joint] = []
+    frontier = [base]
+    while frontier:
+        link = frontier.pop(0)
+        for joint in joints.values():
+            if joint.parent == link:
+                order.append(joint)
+                frontier.append(joint.child)
+    points: dict[str, FloatArray] = {}
+    for element in root.iter("link"):
+        clouds = []
+        for collision in element.iter("collision"):
+            geometry = collision.find("geometry")
+            local = _shape_points(geometry) if geometry is not None else None
+            if local is None:
+                continue
+            transform = _origin(collision)
+            clouds.append(local @ transform[:3, :3].T + transform[:3, 3])
+        if clouds:
+            points[element.get("name", "")] = np.vstack(clouds)
+    # Rigid groups: links joined by fixed joints move as one body.
+    group = {name: name for name in links}
+    for joint in order:
+        if joint.kind == "fixed":
+            group[joint.child] = group[joint.parent]
+    grounded = frozenset(name for name in links if group[name] == group[base])
+    # Bodies that may touch: those a joint joins, those two joints apart (a joint's housing
+    # overlaps its grandparent's) and siblings on one parent (fingers closing on each other).
+    up_of: dict[str, str] = {group[j.child]: group[j.parent] for j in order if group[j.child] != group[j.parent]}
+    neighbours: set[tuple[str, str]] = set()
+    for body, up in up_of.items():
+        near = {up, up_of.get(up, up)} | {other for other, above in up_of.items() if above == up}
+        for other in near:
+            neighbours.add((body, other))
+            neighbours.add((other, body))
+    pairs = {(x, y) for x in links for y in links if group[x] == group[y] or (group[x], group[y]) in neighbours}
+    return _Geometry(tuple(order), points, grounded, frozenset(pairs))
+
+
+def _motion(kind: str, axis: FloatArray, value: FloatArray) -> FloatArray:
+    out = np.broadcast_to(np.eye(4), (*value.shape, 4, 4)).copy()
+    if kind == "prismatic":
+        out[..., :3, 3] = value[..., None] * axis
+        return out
+    x, y, z = axis
+    c, s = np.cos(value), np.sin(value)
+    t = 1.0 - c
+    out[..., 0, 0], out[..., 0, 1], out[..., 0, 2] = t * x * x + c, t * x * y - s * z, t * x * z + s * y
+    out[..., 1, 0], out[..., 1, 1], out[..., 1, 2] = t * x * y + s * z, t * y * y + c, t * y * z - s * x
+    out[..., 2, 0], out[..., 2, 1], out[..., 2, 2] = t * x * z - s * y, t * y * z + s * x, t * z * z + c
+    return out
+
+
+def _base_transform(robot: RobotModel) -> FloatArray:
+    transform = getattr(robot, "base_transform", None)
+    return np.eye(4) if transform is None else np.asarray(transform, dtype=np.float64)
+
+
+def link_transforms(robot: RobotModel, q: npt.ArrayLike) -> dict[str, FloatArray]:
+    """World transforms of every link for joint vectors ``q`` (dof,) or (batch, dof).
+
+    Joints the robot does not actuate are where the robot holds them
+    (:meth:`~armreach_core.robot.RobotModel.held_positions`: a mimic joint follows its master).
+    """
+    geometry = _geometry(robot.parsed.resolved_xml)
+    values = np.asarray(q, dtype=np.float64)
+    batch = values.shape[:-1]
+    index = {name: i for i, name in enumerate(robot.joint_names)}
+    held_names = [j.name for j in robot.held_joints]
+    held = (
+        np.apply_along_axis(robot.held_positions, -1, values) if held_names else np.zeros((*batch, 0))
+    )  # (..., n_held)
+    held_index = {name: i for i, name in enumerate(held_names)}
+    base = _base_transform(robot)
+    frames: dict[str, FloatArray] = {}
+    root = geometry.joints[0].parent if geometry.joints else robot.root_link
+    frames[root] = np.broadcast_to(base, (*batch, 4, 4)).copy()
+    for joint in geometry.joints:
+        transform = frames[joint.parent] @ joint.origin
+        if joint.kind in ("revolute", "continuous", "prismatic"):
+            if joint.name in index:
+                value = values[..., index[joint.name]]
+            elif joint.name in held_index:
+                value = held[..., held_index[joint.name]]
+            else:
+                value = np.zeros(batch)
+            transform = transform @ _motion(joint.kind, joint.axis, value)
+        frames[joint.child] = transform
+    return frames
+
+
+def ground_violations(robot: RobotModel, q: npt.ArrayLike, clearance: float = 0.0) -> dict[str, float]:
+    """Moving links whose collision geometry dips below ``clearance`` (m) at ``q``: link -> lowest z."""
+    geometry = _geometry(robot.parsed.resolved_xml)
+    frames = link_transforms(robot, q)
+    low: dict[str, float] = {}
+    for link, points in geometry.points.items():
+        if link in geometry.grounded:
+            continue
+        transform = frames[link]
+        z = float((points @ transform[:3, :3].T + transform[:3, 3])[:, 2].min())
+        if z < clearance:
+            low[link] = z
+    return low
+
+
+def _lowest(geometry: _Geometry, frames: dict[str, FloatArray]) -> FloatArray:
+    """Per configuration, the lowest point of the moving links' collision geometry (batch,)."""
+    lows: list[FloatArray] = []
+    for link, points in geometry.points.items():
+        if link in geometry.grounded:
+            continue
+        transform = frames[link]
+        z = np.einsum("...j,kj->...k", transform[..., 2, :3], points) + transform[..., 2, 3][..., None]
+        lows.append(z.min(axis=-1))
+    if not lows:
+        return np.full(next(iter(frames.values())).shape[:-2], np.inf)
+    lowest: FloatArray = np.min(np.stack(lows), axis=0)
+    return lowest
+
+
+def _boxes(geometry: _Geometry) -> dict[str, tuple[FloatArray, FloatArray]]:
+    """Each link's collision points as a box in its own frame: centre and half extents."""
+    out = {}
+    for link, points in geometry.points.items():
+        low, high = points.min(axis=0), points.max(axis=0)
+        out[link] = ((low + high) / 2, (high - low) / 2)
+    return out
+
+
+def _overlap(a: tuple[FloatArray, FloatArray, FloatArray], b: tuple[FloatArray, FloatArray, FloatArray]) -> bool:
+    """Whether two oriented boxes (centre, rotation, half extents) overlap (separating-axis test)."""
+    ca, ra, ha = a
+    cb, rb, hb = b
+    d = cb - ca
+    axes = [ra[:, i] for i in range(3)] + [rb[:, i] for i in range(3)]
+    axes += [np.cross(ra[:, i], rb[:, j]) for i in range(3) for j in range(3)]
+    for axis in axes:
+        norm = float(np.linalg.norm(axis))
+        if norm < 1e-9:
+            continue
+        axis = axis / norm
+        span = float(np.abs(ra.T @ axis) @ ha + np.abs(rb.T @ axis) @ hb)
+        if abs(float(d @ axis)) > span:
+            return False
+    return True
+
+
+def self_collisions(robot: RobotModel, q: npt.ArrayLike) -> list[tuple[str, str]]:
+    """Pairs of links that are not neighbours whose collision boxes overlap at ``q`` (one configuration)."""
+    geometry = _geometry(robot.parsed.resolved_xml)
+    frames = link_transforms(robot, np.asarray(q, dtype=np.float64))
+    boxes = _boxes(geometry)
+    placed = {}
+    for link, (centre, half) in boxes.items():
+        transform = frames[link]
+        placed[link] = (transform[:3, :3] @ centre + transform[:3, 3], transform[:3, :3], half)
+    links = sorted(placed)
+    hits = []
+    for i, a in enumerate(links):
+        for b in links[i + 1 :]:
+            if (a, b) in geometry.neighbours:
+                continue
+            if _overlap(placed[a], placed[b]):
+                hits.append((a, b))
+    return hits
+
+
+def _dexterity(robot: RobotModel, q: FloatArray) -> FloatArray:
+    """Smallest singular value of the position Jacobian of the arm's joints (m/rad), per configuration."""
+    jac = robot.jacobian(q)[..., : robot.arm_dof]
+    smallest: FloatArray = np.linalg.svd(jac, compute_uv=False)[..., -1].astype(np.float64)
+    return smallest
+
+
+def _zero(robot: RobotModel) -> FloatArray:
+    return np.clip(np.zeros(robot.dof), robot.lower, robot.upper)
+
+
+def default_home(robot: RobotModel) -> FloatArray:
+    """The default home of ``robot`` (see the module docstring); deterministic.
+
+    Raises:
+        URDFError: no candidate keeps the arm above the ground; the message says how far
+            to raise the base (``base_position``) or which ``home`` to pass.
+    """
+    geometry = _geometry(robot.parsed.resolved_xml)
+    zero = _zero(robot)
+    rng = np.random.default_rng(0)
+    span = np.minimum((robot.upper - robot.lower) / 2, math.pi)
+    directions = rng.uniform(-1.0, 1.0, (DIRECTIONS, robot.dof))
+    directions[:, robot.arm_dof :] = 0.0  # off-arm joints (fingers) stay where they are
+    candidates = [zero[None, :]] + [robot.clip(zero + radius * directions * span) for radius in RADII]
+    batch = np.vstack(candidates)
+    typical = float(np.percentile(_dexterity(robot, robot.sample_configurations(rng, 256)), 75))
+    lowest = _lowest(geometry, link_transforms(robot, batch))
+    dexterity = _dexterity(robot, batch)
+    fine = (lowest >= GROUND_CLEARANCE) & (dexterity >= MIN_DEXTERITY * typical)
+    # Candidates come in rings: the zero pose, then DIRECTIONS per radius. The first ring with
+    # a qualifying pose wins; within it the most dexterous pose without self-collision.
+    rings = [range(0, 1)] + [range(1 + i * DIRECTIONS, 1 + (i + 1) * DIRECTIONS) for i in range(len(RADII))]
+    for ring in rings:
+        ok = [i for i in ring if fine[i]]
+        for i in sorted(ok, key=lambda k: -dexterity[k]):
+            if not self_collisions(robot, batch[i]):
+                reason = "the URDF's zero pose" if i == 0 else "the nearest pose to the zero pose that qualifies"
+                log.info(
+                    "home of %r: %s (lowest link %.3f m above the ground, dexterity %.3g of %.3g)",
+                    robot.name, reason, lowest[i], dexterity[i], typical,
+                )  # fmt: skip
+                return np.asarray(batch[i], dtype=np.float64)
+    best = int(np.argmax(lowest))
+    if lowest[best] < GROUND_CLEARANCE:
+        lift = round(GROUND_CLEARANCE - float(lowest[best]) + 0.05, 2)
+        raise BelowGroundError(
+            f"no home keeps every link of {robot.name!r} above the ground (the best pose leaves a link "
+            f"{-lowest[best]:.3f} m below it); raise the base: base_position=(0, 0, {lift:.2f}) "
+            f"(--base-position 0 0 {lift:.2f}), or pass a home: home=[...] (--home ...)",
+            lift,
+        )
+    raise URDFError(
+        f"no home of {robot.name!r} near its zero pose is clear of the ground and of self-collision and away "
+        "from singularities; pass one: home=[...] (--home ...)"
+    )
+
+
+def check_home(robot: RobotModel, home: npt.ArrayLike) -> None:
+    """Raise :class:`ConfigError` when ``home`` puts a link in the ground, naming the links."""
+    low = ground_violations(robot, home)
+    if low:
+        links = ", ".join(f"{link!r} ({z:+.3f} m)" for link, z in sorted(low.items(), key=lambda item: item[1]))
+        raise ConfigError(
+            f"home {np.round(np.asarray(home, dtype=float), 4).tolist()} puts links of {robot.name!r} in the ground: "
+            f"{links}; choose another home (home=[...], --home ...) or raise the base (base_position=, "
+            "--base-position X Y Z)"
+        )
+
+
+def describe(robot: RobotModel, q: npt.ArrayLike) -> dict[str, Any]:
+    """Clearance, self-collisions and dexterity of ``q``, for reports."""
+    geometry = _geometry(robot.parsed.resolved_xml)
+    values = np.asarray(q, dtype=np.float64)
+    lowest = float(_lowest(geometry, link_transforms(robot, values[None, :]))[0])
+    return {
+        "lowest_link_m": lowest,
+        "self_collisions": self_collisions(robot, values),
+        "dexterity": float(_dexterity(robot, values[None, :])[0]),
+        "path": str(Path(robot.urdf_path)),
+    }

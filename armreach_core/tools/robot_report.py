@@ -1,0 +1,308 @@
+"""``armreach robot``: one page that says whether an arm will work, and what to pass if not.
+
+For one URDF (and the flags that place it), in one run: the chain and its joints with
+limits, the joints off the chain that are held, the end effector, the home pose with its
+ground clearance and dexterity, the reach and the reachable target volume, per installed
+backend the memory and step cost of an env and whether ``reset(seed)`` is deterministic,
+a short parity summary, the inverse-kinematics reference's success on sampled targets,
+and a picture of the arm at home with the target region.
+"""
+
+from __future__ import annotations
+
+import gc
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from armreach_core.backend import Camera
+from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_TASK
+from armreach_core.env import ArmEnv
+from armreach_core.errors import ArmReachError
+from armreach_core.home import describe
+from armreach_core.ik import IKPolicy
+from armreach_core.loading import load_backend_class
+from armreach_core.plugins import available_backends
+from armreach_core.tools.soak import rss_mb
+
+#: What an env may cost on a 2-core machine before the report flags it.
+COST_LIMITS = {"memory_mb": 80.0, "pybullet_steps_per_s": 2000.0, "create_ms": 50.0}
+
+
+@dataclass
+class EngineFacts:
+    backend: str
+    first_env_mb: float = math.nan
+    env_mb: float = math.nan
+    create_ms: float = math.nan
+    cached_create_ms: float = math.nan
+    steps_per_s: float = math.nan
+    deterministic: bool = False
+    ik_success: float = math.nan
+    ik_steps: float = math.nan
+    error: str | None = None
+
+
+@dataclass
+class RobotReport:
+    urdf: str
+    name: str = ""
+    joints: list[dict[str, Any]] = field(default_factory=list)
+    held_joints: list[str] = field(default_factory=list)
+    ee_link: str = ""
+    home: list[float] = field(default_factory=list)
+    home_lowest_m: float = math.nan
+    home_dexterity: float = math.nan
+    home_self_collisions: list[list[str]] = field(default_factory=list)
+    reach_m: float = math.nan
+    target_center: list[float] = field(default_factory=list)
+    target_radius_m: float = math.nan
+    target_volume_m3: float = math.nan
+    engines: list[EngineFacts] = field(default_factory=list)
+    parity: dict[str, Any] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def usable(self) -> bool:
+        return not self.problems
+
+    def to_json(self) -> dict[str, Any]:
+        out = asdict(self)
+        out["usable"] = self.usable
+        return out
+
+
+def _robot_facts(report: RobotReport, env: ArmEnv) -> None:
+    robot = env.robot
+    report.name = robot.name
+    report.ee_link = robot.ee_link
+    report.joints = [
+        {"name": j.name, "type": j.type, "lower": j.lower, "upper": j.upper, "effort": j.effort, "velocity": j.velocity}
+        for j in robot.joints
+    ]
+    held = getattr(robot, "held_joints", ())
+    report.held_joints = [str(getattr(j, "name", j)) for j in held]
+    report.home = [float(v) for v in robot.home]
+    facts = describe(robot, robot.home)
+    report.home_lowest_m = facts["lowest_link_m"]
+    report.home_dexterity = facts["dexterity"]
+    report.home_self_collisions = [list(pair) for pair in facts["self_collisions"]]
+    sampler = getattr(env.task, "sampler", None)
+    if sampler is not None:
+        report.reach_m = float(sampler.map.reach)
+        report.target_center = [float(v) for v in sampler.center]
+        report.target_radius_m = float(sampler.radius)
+        points = sampler.map.centers(sampler.center - sampler.radius, sampler.center + sampler.radius)
+        inside = points[sampler.accepts(points)] if len(points) else points
+        report.target_volume_m3 = float(len(inside) * sampler.map.voxel**3)
+
+
+def _deterministic(env: ArmEnv, seed: int) -> bool:
+    def run() -> list[Any]:
+        obs, _ = env.reset(seed=seed)
+        rng = np.random.default_rng(seed)
+        seen = [np.asarray(obs).copy()]
+        for _ in range(30):
+            obs, *_ = env.step(rng.uniform(-1, 1, env.task.action_size()).astype(np.float32))
+            seen.append(np.asarray(obs).copy())
+        return seen
+
+    first = run()
+    rng = np.random.default_rng(seed + 1)
+    for _ in range(40):  # something else in between
+        env.step(rng.uniform(-1, 1, env.task.action_size()).astype(np.float32))
+    return all(np.array_equal(a, b) for a, b in zip(first, run(), strict=True))
+
+
+def _ik(env: ArmEnv, episodes: int, seed: int) -> tuple[float, float]:
+    """Success rate and mean steps of the planned IK reference on ``episodes`` seeded targets."""
+    successes, steps = 0, []
+    for i in range(episodes):
+        env.reset(seed=seed + i)
+        policy = IKPolicy(env.robot, env.max_joint_step, restarts=16)
+        target = env.task.target  # type: ignore[attr-defined]
+        for step in range(1, 400):
+            q = env.backend.read_state().q
+            _, _, terminated, truncated, info = env.step(policy.act(q, target))
+            if info.get("is_success"):
+                successes += 1
+                steps.append(step)
+                break
+            if terminated or truncated:
+                break
+    return successes / max(episodes, 1), float(np.mean(steps)) if steps else math.nan
+
+
+def _engine(backend: str, env_kwargs: Mapping[str, Any], steps: int, ik_episodes: int, seed: int) -> EngineFacts:
+    facts = EngineFacts(backend)
+    try:
+        load_backend_class(backend)
+    except ArmReachError as exc:
+        facts.error = str(exc)
+        return facts
+    gc.collect()
+    before = rss_mb()
+    t0 = time.perf_counter()
+    env = ArmEnv(DEFAULT_TASK, backend=backend, **env_kwargs)
+    facts.create_ms = 1000 * (time.perf_counter() - t0)
+    facts.first_env_mb = rss_mb() - before
+    try:
+        gc.collect()
+        middle = rss_mb()
+        t0 = time.perf_counter()
+        second = ArmEnv(DEFAULT_TASK, backend=backend, **env_kwargs)
+        facts.cached_create_ms = 1000 * (time.perf_counter() - t0)
+        second.reset(seed=seed)
+        facts.env_mb = rss_mb() - middle
+        second.close()
+        env.reset(seed=seed)
+        rng = np.random.default_rng(seed)
+        actions = rng.uniform(-1, 1, (steps, env.task.action_size())).astype(np.float32)
+        t0 = time.perf_counter()
+        for action in actions:
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                env.reset()
+        facts.steps_per_s = steps / (time.perf_counter() - t0)
+        facts.deterministic = _deterministic(env, seed)
+        if ik_episodes:
+            facts.ik_success, facts.ik_steps = _ik(env, ik_episodes, 10_000 + seed)
+    finally:
+        env.close()
+    return facts
+
+
+def picture(env_kwargs: Mapping[str, Any], backend: str, path: Path) -> None:
+    """The arm at home with the target ball's centre and radius marked, framed by its reach."""
+    from PIL import Image
+
+    env = ArmEnv(DEFAULT_TASK, backend=backend, render_mode="rgb_array", **env_kwargs)
+    try:
+        env.reset(seed=0)
+        sampler = env.task.sampler  # type: ignore[attr-defined]
+        reach = float(sampler.map.reach)
+        centre = tuple(float(v) for v in sampler.center)
+        env.backend.add_marker("target-region", float(sampler.radius), (0.2, 0.5, 0.9, 0.25))
+        env.backend.set_marker("target-region", np.asarray(centre))
+        env.camera = Camera(target=(centre[0] / 2, centre[1] / 2, centre[2] / 2), distance=2.6 * max(reach, 0.2))
+        frame = env.render()
+    finally:
+        env.close()
+    if frame is not None:
+        Image.fromarray(frame).save(path)
+
+
+def inspect_robot(
+    urdf: str | None,
+    *,
+    env_kwargs: Mapping[str, Any] | None = None,
+    backends: Sequence[str] | None = None,
+    steps: int = 500,
+    ik_episodes: int = 20,
+    parity_steps: int = 100,
+    seed: int = 0,
+) -> RobotReport:
+    """Everything ``armreach robot`` reports; problems that make the arm unusable are in ``problems``."""
+    kwargs = {"urdf": urdf, **dict(env_kwargs or {})}
+    report = RobotReport(urdf=str(urdf) if urdf is not None else "(bundled)")
+    names = list(backends) if backends is not None else sorted(available_backends(), key=lambda b: b != DEFAULT_BACKEND)
+    try:
+        probe = ArmEnv(DEFAULT_TASK, backend=names[0], **kwargs)
+    except ArmReachError as exc:
+        report.problems.append(str(exc))
+        return report
+    try:
+        _robot_facts(report, probe)
+    finally:
+        probe.close()
+    for name in names:
+        facts = _engine(name, kwargs, steps, ik_episodes, seed)
+        report.engines.append(facts)
+        if facts.error is not None:
+            report.warnings.append(f"{name}: {facts.error}")
+            continue
+        if not facts.deterministic:
+            report.problems.append(f"{name}: reset(seed) is not deterministic (joints off the chain drift?)")
+        if facts.ik_success < 0.99:
+            report.warnings.append(f"{name}: the IK reference reached {facts.ik_success:.0%} of {ik_episodes} targets")
+        if facts.env_mb > COST_LIMITS["memory_mb"]:
+            report.warnings.append(
+                f"{name}: an env costs {facts.env_mb:.0f} MB (aim: <= {COST_LIMITS['memory_mb']:.0f})"
+            )
+        if facts.cached_create_ms > COST_LIMITS["create_ms"]:
+            report.warnings.append(
+                f"{name}: creating an env takes {facts.cached_create_ms:.0f} ms with the model cached"
+            )
+    working = [f.backend for f in report.engines if f.error is None]
+    if len(working) >= 2 and parity_steps:
+        from armreach_core.tools.parity import run_parity
+
+        extra = {k: v for k, v in kwargs.items() if k not in ("urdf", "ee_link")}
+        parity = run_parity(
+            working, urdf, kwargs.get("ee_link"), steps=parity_steps, configs=200, seed=seed, env_kwargs=extra
+        )
+        report.parity = {
+            "fk_max_m": {name: kin.max_m for name, kin in parity.kinematic.items()},
+            "gaps": {
+                f"{sequence} {name}": {"ee_rms_mm": gap.ee_rms_m * 1e3, "joint_rms_rad": gap.joint_rms_rad}
+                for sequence in parity.trajectories
+                for name in parity.backends[1:]
+                for gap in [parity.gap(sequence, name)]
+            },
+            "failures": parity.failures(),
+        }
+    return report
+
+
+def markdown(report: RobotReport) -> str:
+    lines = [f"# {report.name or report.urdf}", "", f"URDF: `{report.urdf}`", ""]
+    if report.problems:
+        lines += ["**Cannot be used as it is:**", ""] + [f"- {p}" for p in report.problems] + [""]
+    else:
+        lines += ["**Usable.**", ""]
+    if report.joints:
+        lines += ["| joint | type | lower | upper | effort | velocity | home |", "|---|---|---|---|---|---|---|"]
+        for joint, home in zip(report.joints, report.home, strict=False):
+            lines.append(
+                f"| {joint['name']} | {joint['type']} | {joint['lower']:.3f} | {joint['upper']:.3f} | "
+                f"{joint['effort']:g} | {joint['velocity']:g} | {home:.3f} |"
+            )
+        lines += [
+            "",
+            f"- end effector: `{report.ee_link}`",
+            f"- joints off the chain, held: {', '.join(report.held_joints) or 'none'}",
+            f"- home: lowest link {report.home_lowest_m:+.3f} m above the ground, dexterity {report.home_dexterity:.3f}"
+            f" m/rad, self-collisions: {report.home_self_collisions or 'none'}",
+            f"- reach {report.reach_m:.3f} m; targets in a ball of {report.target_radius_m:.2f} m around "
+            f"{np.round(report.target_center, 3).tolist()}: {report.target_volume_m3 * 1e3:.1f} litres reachable",
+            "",
+        ]
+    if report.engines:
+        lines += [
+            "| backend | env memory (first env) | creation (cached) | steps/s | deterministic | IK success (steps) |",
+            "|---|---|---|---|---|---|",
+        ]
+        for f in report.engines:
+            if f.error is not None:
+                lines.append(f"| {f.backend} | not installed | | | | |")
+                continue
+            lines.append(
+                f"| {f.backend} | {f.env_mb:.1f} MB ({f.first_env_mb:.1f}) | {f.cached_create_ms:.1f} ms "
+                f"({f.create_ms:.0f}) | {f.steps_per_s:,.0f} | {'yes' if f.deterministic else 'NO'} | "
+                f"{f.ik_success:.0%} ({f.ik_steps:.1f}) |"
+            )
+        lines.append("")
+    if report.parity:
+        lines += ["Parity (end-effector RMS gap, joint RMS gap):", ""]
+        for key, gap in report.parity["gaps"].items():
+            lines.append(f"- {key}: {gap['ee_rms_mm']:.1f} mm, {gap['joint_rms_rad']:.3f} rad")
+        lines.append("")
+    if report.warnings:
+        lines += ["Warnings:", ""] + [f"- {w}" for w in report.warnings] + [""]
+    return "\n".join(lines)

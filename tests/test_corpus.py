@@ -1,0 +1,198 @@
+"""Every public arm of the corpus works with no arguments: end effector, held joints, check_env.
+
+The arms come from :data:`armreach_core.corpus.CORPUS` (descriptions nobody here wrote);
+one that is not installed is skipped with the command that installs it. What each arm
+must give follows from its URDF alone; the expected end effectors below are what those
+rules give, written down so that a change in them is seen.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from armreach_core.anatomy import MOVABLE_TYPES
+from armreach_core.corpus import CORPUS, CorpusArm
+from armreach_core.loading import load_robot
+from armreach_core.robot import RobotModel
+from tests.conftest import BACKENDS
+
+#: Arms whose meshes make their tests take 2-7 s on a 2-core machine (measured with a cold
+#: mesh cache; the others take under 2 s each, about 13 s together).
+SLOW = {"kinova-jaco", "z1", "so101", "panda", "ur10"}
+#: What the rules of armreach_core.anatomy give: (end effector, gripper joints).
+EXPECTED = {
+    "ur3": ("tool0", ()),
+    "ur5": ("tool0", ()),
+    "ur5-gripper": ("tool0", ()),
+    "ur10": ("tool0", ()),
+    "kinova-jaco": ("j2s6s200_end_effector", ()),
+    "z1": ("gripperStator", ("jointGripper",)),
+    "so100": ("gripper", ("gripper",)),
+    "so101": ("gripper_link", ("gripper",)),
+    "xarm7": ("link_eef", ()),
+    "panda": ("panda_hand_tcp", ("panda_finger_joint1", "panda_finger_joint2")),
+    "talos-left-arm": ("gripper_left_base_link", ("gripper_left_joint",)),
+    "kuka-iiwa": ("lbr_iiwa_link_7", ()),
+    "franka-panda": ("panda_grasptarget", ("panda_finger_joint1", "panda_finger_joint2")),
+    "xarm6": ("link6", ()),
+}
+#: Arms whose held joints are read from the engines: a jaw, mimic fingers, a gripper below a fixed stator.
+HELD = ("so100", "franka-panda", "z1")
+#: Independent of the code under test: names that say a joint or its child belongs to a gripper.
+GRIPPER_JOINT_WORDS = ("finger", "gripper", "jaw", "claw", "knuckle")
+GRIPPER_PART_WORDS = ("finger", "jaw", "claw", "knuckle")
+
+
+def _arms(names: tuple[str, ...] | None = None) -> list[Any]:
+    return [
+        pytest.param(arm, id=arm.name, marks=[pytest.mark.slow] if arm.name in SLOW else [])
+        for arm in CORPUS
+        if names is None or arm.name in names
+    ]
+
+
+def _path(arm: CorpusArm) -> str:
+    path = arm.path
+    if path is None:
+        pytest.skip(f"{arm.name} is not installed: {arm.install}")
+    return str(path)
+
+
+def _says_gripper(joint: Any) -> bool:
+    name, child = str(joint.name).lower(), str(joint.child).lower()
+    return (
+        joint.mimic is not None
+        or any(w in name for w in GRIPPER_JOINT_WORDS)
+        or any(w in child for w in GRIPPER_PART_WORDS)
+    )
+
+
+@pytest.mark.parametrize("arm", _arms())
+def test_loads_with_no_arguments(arm: CorpusArm) -> None:
+    path = _path(arm)
+    robot = RobotModel(path)  # every arm, TALOS's hanging one included (its base is raised)
+    assert robot.dof >= 1
+
+
+@pytest.mark.parametrize("arm", _arms())
+def test_end_effector_is_never_a_finger(arm: CorpusArm) -> None:
+    path = _path(arm)
+    robot = load_robot(path)
+    assert (robot.ee_link, robot.gripper_joints) == EXPECTED[arm.name]
+    urdf = {str(j.name): j for j in robot.parsed.model.robot.joints}
+    by_child = {str(j.child): j for j in urdf.values()}
+    above, link = [], robot.ee_link
+    while link in by_child:
+        above.append(by_child[link])
+        link = str(by_child[link].parent)
+    assert not [str(j.name) for j in above if str(j.type) in MOVABLE_TYPES and _says_gripper(j)]
+    assert not [name for name in robot.joint_names if _says_gripper(urdf[name])]
+    assert not set(robot.gripper_joints) & set(robot.joint_names)
+    assert not any(w in robot.ee_link.lower() for w in GRIPPER_PART_WORDS)
+
+
+@pytest.mark.parametrize("arm", _arms())
+def test_held_joints_cover_every_movable_joint_not_actuated(arm: CorpusArm) -> None:
+    path = _path(arm)
+    robot = load_robot(path)
+    movable = {str(j.name) for j in robot.parsed.model.robot.joints if str(j.type) in MOVABLE_TYPES}
+    held = {j.name for j in robot.held_joints}
+    assert held == movable - set(robot.joint_names)
+    assert not held & set(robot.joint_names)
+    position = {j.name: j.position for j in robot.held_joints}
+    for joint in robot.held_joints:
+        assert math.isfinite(joint.position) and joint.effort > 0
+        if joint.mimic is not None and joint.mimic.joint in position:  # a mimic of a held joint: held with it
+            assert joint.position == joint.mimic.multiplier * position[joint.mimic.joint] + joint.mimic.offset
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("arm", _arms())
+def test_check_env(arm: CorpusArm, backend: str) -> None:
+    path = _path(arm)
+    env = gym.make("armreach/Reach-v0", urdf=path, backend=backend)
+    try:
+        check_env(env.unwrapped, skip_render_check=True)
+        # and a longer check: an episode replays exactly after other episodes
+        first = _episode(env, 3)
+        _episode(env, 4)
+        np.testing.assert_array_equal(_episode(env, 3), first)
+    finally:
+        env.close()
+
+
+def _episode(env: gym.Env, seed: int) -> np.ndarray:
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    seen = [np.asarray(obs, dtype=np.float64).copy()]
+    for _ in range(20):
+        obs, *_ = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
+        seen.append(np.asarray(obs, dtype=np.float64).copy())
+    return np.array(seen)
+
+
+def _pybullet_joints(world: Any) -> dict[str, int]:
+    import pybullet as pb
+
+    body, cid = world.body, world.client
+    return {
+        pb.getJointInfo(body, i, physicsClientId=cid)[1].decode(): i
+        for i in range(pb.getNumJoints(body, physicsClientId=cid))
+    }
+
+
+def _held_state(world: Any, names: list[str]) -> np.ndarray:
+    """Positions of joints the backend does not report (held joints), read from the engine."""
+    if world.name == "pybullet":
+        import pybullet as pb
+
+        index = _pybullet_joints(world)
+        return np.array([pb.getJointState(world.body, index[n], physicsClientId=world.client)[0] for n in names])
+    model, data = world.model, world.data
+    return np.array([data.qpos[model.jnt_qposadr[model.joint(n).id]] for n in names])
+
+
+def _disturb(world: Any, names: list[str], value: float) -> None:
+    if world.name == "pybullet":
+        import pybullet as pb
+
+        index = _pybullet_joints(world)
+        for n in names:
+            pb.resetJointState(world.body, index[n], value, 0.3, physicsClientId=world.client)
+        return
+    model, data = world.model, world.data
+    for n in names:
+        data.qpos[model.jnt_qposadr[model.joint(n).id]] = value
+        data.qvel[model.jnt_dofadr[model.joint(n).id]] = 0.3
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("arm", _arms(HELD))
+def test_held_joints_are_reset_and_held(arm: CorpusArm, backend: str) -> None:
+    """Fingers go back to their hold position at every reset, whatever moved them, and stay there."""
+    from armreach_core.backend import PhysicsConfig
+    from armreach_core.loading import load_backend_class
+
+    path = _path(arm)
+    robot = load_robot(path)
+    names = [j.name for j in robot.held_joints]
+    world = load_backend_class(backend)(robot, PhysicsConfig())
+    try:
+        world.reset_joints(robot.home)
+        _disturb(world, names, 0.02)
+        world.step()
+        world.reset_joints(robot.home)
+        np.testing.assert_array_equal(_held_state(world, names), robot.held_positions(robot.home))
+        rng = np.random.default_rng(0)
+        for _ in range(20):
+            world.set_joint_targets(robot.clip(world.joint_state()[0] + rng.uniform(-0.05, 0.05, robot.dof)))
+            world.step()
+        np.testing.assert_allclose(_held_state(world, names), robot.held_positions(robot.home), atol=2e-3)
+    finally:
+        world.close()

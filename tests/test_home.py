@@ -1,0 +1,71 @@
+"""The default home: clear of the ground and of self-collision, away from singularities, from the URDF alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from armreach_core import ConfigError, RobotModel, URDFError
+from armreach_core.corpus import CORPUS
+from armreach_core.home import GROUND_CLEARANCE, default_home, describe, ground_violations
+from armreach_core.ik import solve_with_restarts
+from armreach_core.workspace import reachability_map
+
+
+def _load(arm):
+    if arm.path is None:
+        pytest.skip(f"{arm.name}: `{arm.install}` first")
+    return RobotModel(arm.path)
+
+
+@pytest.mark.parametrize("arm", CORPUS, ids=[a.name for a in CORPUS])
+def test_default_home_is_clear_and_dexterous(arm):
+    robot = _load(arm)
+    facts = describe(robot, robot.home)
+    assert facts["lowest_link_m"] >= GROUND_CLEARANCE
+    assert facts["self_collisions"] == []
+    zero = np.clip(np.zeros(robot.dof), robot.lower, robot.upper)
+    zero_facts = describe(robot, zero)
+    if zero_facts["lowest_link_m"] >= GROUND_CLEARANCE and not zero_facts["self_collisions"]:
+        # the URDF's zero pose is kept unless it is near a singularity
+        assert np.allclose(robot.home, zero) or facts["dexterity"] > zero_facts["dexterity"]
+    np.testing.assert_array_equal(default_home(robot), robot.home)  # deterministic
+
+
+def test_a_home_in_the_ground_names_the_links(ar6_urdf):
+    with pytest.raises(ConfigError, match=r"in the ground: 'wrist_2_link' \(-0\.04\d m\)"):
+        RobotModel(ar6_urdf, home=np.zeros(6))
+    robot = RobotModel(ar6_urdf)
+    assert ground_violations(robot, robot.home) == {}
+
+
+def _sunk(tmp_path, ar6_urdf):
+    """ar6 with its first joint 0.5 m down: no pose keeps it above the ground."""
+    text = ar6_urdf.read_text()
+    start = text.index("<origin", text.index('<joint name="shoulder_pan_joint"'))
+    sunk = tmp_path / "sunk.urdf"
+    sunk.write_text(text[:start] + '<origin xyz="0 0 -0.5" rpy="0 0 0"' + text[text.index("/>", start) :])
+    return sunk
+
+
+def test_an_arm_below_the_ground_gets_its_base_raised(tmp_path, ar6_urdf):
+    robot = RobotModel(_sunk(tmp_path, ar6_urdf))
+    assert 0.4 < robot.base_position[2] < 0.7
+    assert describe(robot, robot.home)["lowest_link_m"] >= GROUND_CLEARANCE
+
+
+def test_a_given_base_below_the_ground_is_told_how_far_to_raise_it(tmp_path, ar6_urdf):
+    with pytest.raises(URDFError, match=r"base_position=\(0, 0, 0\.\d+\) \(--base-position 0 0 0\.\d+\)"):
+        RobotModel(_sunk(tmp_path, ar6_urdf), base_position=(0, 0, 0))
+
+
+@pytest.mark.parametrize("arm", CORPUS, ids=[a.name for a in CORPUS])
+def test_ik_with_restarts_reaches_the_reachable_targets(arm):
+    robot = _load(arm)
+    points = reachability_map(robot).centers(np.full(3, -5.0), np.full(3, 5.0))
+    rng = np.random.default_rng(0)
+    # points the arm reaches (voxel centres of its reachability map may lie a little outside)
+    targets = robot.forward_kinematics(robot.sample_configurations(rng, 50))
+    assert len(points) > 0
+    reached = [solve_with_restarts(robot, target, robot.home)[1] < 1e-3 for target in targets]
+    assert np.mean(reached) >= 0.99, f"{arm.name}: {np.mean(reached):.0%}"

@@ -1,0 +1,70 @@
+"""``armreach robot``: one page that says whether an arm works, and exit 1 with the fix when it does not."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from armreach_core.cli import main
+from tests.conftest import BACKENDS
+
+pytestmark = pytest.mark.skipif(not BACKENDS, reason="no physics backend installed")
+FAST = ["--steps", "50", "--ik-episodes", "3", "--parity-steps", "0", "--backends", BACKENDS[0]]
+
+
+def test_the_bundled_arm_is_usable(tmp_path, capsys):
+    assert main(["robot", *FAST, "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "**Usable.**" in out
+    report = json.loads((tmp_path / "robot.json").read_text())
+    assert report["usable"] is True
+    assert report["ee_link"] == "tool0"
+    (engine,) = report["engines"]
+    assert engine["deterministic"] is True
+    assert engine["steps_per_s"] > 0
+    assert engine["ik_success"] == 1.0
+    assert report["home_lowest_m"] > 0
+    image = np.asarray(Image.open(tmp_path / "robot.png"))
+    assert image.ndim == 3
+    assert image.std() > 5  # not blank
+
+
+def test_an_arm_held_in_the_ground_exits_1_with_the_flag_that_fixes_it(tmp_path, ar6_urdf, capsys):
+    text = ar6_urdf.read_text()
+    start = text.index("<origin", text.index('<joint name="shoulder_pan_joint"'))
+    sunk = tmp_path / "sunk.urdf"
+    sunk.write_text(text[:start] + '<origin xyz="0 0 -0.5" rpy="0 0 0"' + text[text.index("/>", start) :])
+    assert main(["robot", str(sunk), *FAST, "--out", str(tmp_path / "auto")]) == 0  # its base is raised
+    assert json.loads((tmp_path / "auto" / "robot.json").read_text())["usable"] is True
+    capsys.readouterr()
+    args = [*FAST, "--base-position", "0", "0", "0", "--out", str(tmp_path / "out")]
+    assert main(["robot", str(sunk), *args]) == 1
+    out = capsys.readouterr().out
+    assert "Cannot be used as it is" in out
+    assert "--base-position 0 0 0." in out
+    assert not (tmp_path / "out" / "robot.png").exists()
+
+
+def test_arm_flags_reach_the_run_and_its_evaluation(tmp_path):
+    """--home and --base-position on `train` are recorded in the run and used by `evaluate`."""
+    pytest.importorskip("stable_baselines3")
+    import yaml
+
+    from armreach_core.rl.agents import env_kwargs
+    from armreach_core.rl.runs import read_config
+
+    run = tmp_path / "ik"
+    home = ["0.1", "-1.5", "1.5", "-1.5", "-1.5", "0"]
+    argv = ["train", "--algo", "ik", "--home", *home, "--base-position", "0", "0", "0.2", "--out", str(run)]
+    assert main(argv) == 0
+    env = yaml.safe_load((run / "config.yaml").read_text())["settings"]["env"]
+    assert env["home"] == [float(v) for v in home]
+    assert env["base_position"] == [0.0, 0.0, 0.2]
+    kwargs = env_kwargs(read_config(run), evaluation=True)
+    assert kwargs["base_position"] == [0.0, 0.0, 0.2]
+    assert main(["evaluate", str(run), "--episodes", "2"]) == 0
+    with pytest.raises(SystemExit):  # a wrong number of values is refused by the parser
+        main(["rollout", "--base-position", "0", "0"])
