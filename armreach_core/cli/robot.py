@@ -23,12 +23,19 @@ def add_parser(sub: Any) -> None:
     )
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: runs/robot-<time>)")
     parser.add_argument("--json", action="store_true", help="print the report as JSON instead of markdown")
+    parser.add_argument(
+        "--corpus",
+        action="store_true",
+        help="check every installed arm of the corpus (armreach_core/corpus.py) instead",
+    )
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from armreach_core.tools.robot_report import inspect_robot, markdown, picture
 
+    if args.corpus:
+        return _corpus(args)
     kwargs = robot_kwargs(args)
     report = inspect_robot(
         args.urdf,
@@ -49,3 +56,36 @@ def run(args: argparse.Namespace) -> int:
     print(json.dumps(report.to_json(), indent=1, default=str) if args.json else markdown(report))
     print("saved " + ", ".join(str(p) for p in saved))
     return 0 if report.usable else 1
+
+
+def _corpus(args: argparse.Namespace) -> int:
+    """One line per corpus arm: home clearance, determinism, memory, steps/s and IK success per engine."""
+    from armreach_core.corpus import CORPUS
+    from armreach_core.tools.robot_report import corpus_table, inspect_robot
+
+    out: Path = args.out or Path("runs") / time.strftime("robot-corpus-%Y%m%d-%H%M%S")
+    out.mkdir(parents=True, exist_ok=True)
+    reports = {}
+    for arm in CORPUS:
+        if arm.path is None:
+            print(f"{arm.name}: not installed ({arm.install})")
+            continue
+        started = time.perf_counter()
+        reports[arm.name] = inspect_robot(
+            str(arm.path),
+            env_kwargs=robot_kwargs(args),
+            backends=args.backends,
+            steps=args.steps,
+            ik_episodes=args.ik_episodes,
+            parity_steps=args.parity_steps,
+        )
+        verdict = "usable" if reports[arm.name].usable else "NOT usable"
+        print(f"{arm.name}: {verdict} ({time.perf_counter() - started:.0f} s)")
+    table = corpus_table(reports)
+    (out / "corpus.md").write_text(table)
+    (out / "corpus.json").write_text(
+        json.dumps({name: r.to_json() for name, r in reports.items()}, indent=1, default=str) + "\n"
+    )
+    print(table)
+    print(f"saved {out / 'corpus.md'} and {out / 'corpus.json'}")
+    return 0 if all(r.usable for r in reports.values()) else 1

@@ -306,3 +306,30 @@ def markdown(report: RobotReport) -> str:
     if report.warnings:
         lines += ["Warnings:", ""] + [f"- {w}" for w in report.warnings] + [""]
     return "\n".join(lines)
+
+
+def corpus_table(reports: Mapping[str, RobotReport]) -> str:
+    """A markdown table, one row per arm and backend."""
+    lines = [
+        "| arm | end effector | held joints | home clearance | backend | deterministic | env memory | steps/s "
+        "| cached creation | IK success |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, report in reports.items():
+        if not report.engines:
+            lines.append(f"| {name} | – | – | – | – | – | – | – | – | {'; '.join(report.problems)} |")
+            continue
+        for f in report.engines:
+            head = (
+                f"| {name} | `{report.ee_link}` | {len(report.held_joints)} | {report.home_lowest_m * 100:.1f} cm"
+                if f is report.engines[0]
+                else "| | | | "
+            )
+            if f.error is not None:
+                lines.append(f"{head} | {f.backend} | not installed | | | | |")
+                continue
+            lines.append(
+                f"{head} | {f.backend} | {'yes' if f.deterministic else 'NO'} | {f.env_mb:.1f} MB | "
+                f"{f.steps_per_s:,.0f} | {f.cached_create_ms:.1f} ms | {f.ik_success:.0%} |"
+            )
+    return "\n".join(lines) + "\n"
