@@ -15,7 +15,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -109,9 +109,8 @@ class ObservationLayout:
         return "\n".join(rows)
 
 
-@dataclass(frozen=True)
-class Score:
-    """A task's score of one state: reward, success and the ``info`` terms."""
+class Score(NamedTuple):
+    """A task's score of one state: reward, success and the ``info`` terms (a tuple: cheap to make)."""
 
     reward: float
     success: bool

@@ -10,7 +10,6 @@ and a picture of the arm at home with the target region.
 
 from __future__ import annotations
 
-import gc
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -28,7 +27,6 @@ from armreach_core.home import describe
 from armreach_core.ik import IKPolicy
 from armreach_core.loading import load_backend_class
 from armreach_core.plugins import available_backends
-from armreach_core.tools.soak import rss_mb
 
 #: What an env may cost on a 2-core machine before the report flags it.
 COST_LIMITS = {"memory_mb": 80.0, "pybullet_steps_per_s": 2000.0, "create_ms": 50.0}
@@ -139,6 +137,45 @@ def _ik(env: ArmEnv, episodes: int, seed: int) -> tuple[float, float]:
     return successes / max(episodes, 1), float(np.mean(steps)) if steps else math.nan
 
 
+_MEMORY_PROBE = """
+import gc, json, sys
+import numpy as np
+from armreach_core.defaults import DEFAULT_TASK
+from armreach_core.env import ArmEnv
+from armreach_core.loading import load_backend_class
+from armreach_core.tools.soak import rss_mb
+backend, kwargs = sys.argv[1], json.loads(sys.argv[2])
+load_backend_class(backend)
+def make():
+    env = ArmEnv(DEFAULT_TASK, backend=backend, **kwargs)
+    env.reset(seed=0)
+    for _ in range(10):
+        env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+    return env
+gc.collect(); start = rss_mb()
+first = make(); gc.collect(); middle = rss_mb()
+second = make(); gc.collect(); end = rss_mb()
+print(json.dumps([middle - start, end - middle]))
+"""
+
+
+def env_memory_mb(backend: str, env_kwargs: Mapping[str, Any]) -> tuple[float, float]:
+    """Resident memory of the first env in a fresh process (model and caches included) and of one more env."""
+    import json
+    import subprocess
+    import sys
+
+    result = subprocess.run(
+        [sys.executable, "-c", _MEMORY_PROBE, backend, json.dumps(dict(env_kwargs), default=str)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=True,
+    )
+    first, more = json.loads(result.stdout.strip().splitlines()[-1])
+    return float(first), float(more)
+
+
 def _engine(backend: str, env_kwargs: Mapping[str, Any], steps: int, ik_episodes: int, seed: int) -> EngineFacts:
     facts = EngineFacts(backend)
     try:
@@ -146,20 +183,14 @@ def _engine(backend: str, env_kwargs: Mapping[str, Any], steps: int, ik_episodes
     except ArmReachError as exc:
         facts.error = str(exc)
         return facts
-    gc.collect()
-    before = rss_mb()
+    facts.first_env_mb, facts.env_mb = env_memory_mb(backend, env_kwargs)
     t0 = time.perf_counter()
     env = ArmEnv(DEFAULT_TASK, backend=backend, **env_kwargs)
     facts.create_ms = 1000 * (time.perf_counter() - t0)
-    facts.first_env_mb = rss_mb() - before
     try:
-        gc.collect()
-        middle = rss_mb()
         t0 = time.perf_counter()
         second = ArmEnv(DEFAULT_TASK, backend=backend, **env_kwargs)
         facts.cached_create_ms = 1000 * (time.perf_counter() - t0)
-        second.reset(seed=seed)
-        facts.env_mb = rss_mb() - middle
         second.close()
         env.reset(seed=seed)
         rng = np.random.default_rng(seed)
@@ -285,7 +316,8 @@ def markdown(report: RobotReport) -> str:
         ]
     if report.engines:
         lines += [
-            "| backend | env memory (first env) | creation (cached) | steps/s | deterministic | IK success (steps) |",
+            "| backend | memory per env (first env) | creation (again) | steps/s | deterministic "
+            "| IK success (steps) |",
             "|---|---|---|---|---|---|",
         ]
         for f in report.engines:
@@ -311,8 +343,8 @@ def markdown(report: RobotReport) -> str:
 def corpus_table(reports: Mapping[str, RobotReport]) -> str:
     """A markdown table, one row per arm and backend."""
     lines = [
-        "| arm | end effector | held joints | home clearance | backend | deterministic | env memory | steps/s "
-        "| cached creation | IK success |",
+        "| arm | end effector | held joints | home clearance | backend | deterministic | memory per env (first) "
+        "| steps/s | creation (again) | IK success |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, report in reports.items():
@@ -329,7 +361,7 @@ def corpus_table(reports: Mapping[str, RobotReport]) -> str:
                 lines.append(f"{head} | {f.backend} | not installed | | | | |")
                 continue
             lines.append(
-                f"{head} | {f.backend} | {'yes' if f.deterministic else 'NO'} | {f.env_mb:.1f} MB | "
-                f"{f.steps_per_s:,.0f} | {f.cached_create_ms:.1f} ms | {f.ik_success:.0%} |"
+                f"{head} | {f.backend} | {'yes' if f.deterministic else 'NO'} | {f.env_mb:.0f} MB "
+                f"({f.first_env_mb:.0f}) | {f.steps_per_s:,.0f} | {f.cached_create_ms:.1f} ms | {f.ik_success:.0%} |"
             )
     return "\n".join(lines) + "\n"
