@@ -31,6 +31,10 @@ from armreach_core.task import Component, GoalArray, ObservationLayout, Scene, T
 from armreach_core.workspace import TargetSampler, reachability_map
 
 TARGET_MARKER = "target"
+#: How far (rad or m) the observed joint angles may pass the joint limits: an engine with soft
+#: limits (MuJoCo) lets a joint overshoot by a few mrad, and clipping that away would make the
+#: observed end effector disagree with the observed joint angles.
+LIMIT_SLACK = 0.05
 # The observation's components (names used in the layout and its docstring table).
 JOINTS, EE, TARGET, VELOCITIES, DELTA = (
     "joint angles",
@@ -132,7 +136,15 @@ class ReachTask(Task):
         ball_high = self.sampler.center + self.sampler.radius
         span = np.full(3, 2 * reach + 2 * self.sampler.radius + 0.2)
         vel = 2.0 * robot.velocity_limits
-        joint = Component(JOINTS, n, "rad", robot.lower, robot.upper, "θ, inside the joint limits")
+        slack = LIMIT_SLACK
+        joint = Component(
+            JOINTS,
+            n,
+            "rad",
+            robot.lower - slack,
+            robot.upper + slack,
+            "θ, the joint limits ± 0.05 (soft limits overshoot)",
+        )
         ee = Component(EE, 3, "m", base - box, base + box, "p_e, world frame, from the engine")
         target = Component(TARGET, 3, "m", ball_low, ball_high, "p_t, world frame")
         qd = Component(VELOCITIES, n, "rad/s", -vel, vel, "θ̇, bounded by twice the URDF limits")

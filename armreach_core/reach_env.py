@@ -33,7 +33,7 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
 
     | index | component | unit | low | high | notes |
     |---|---|---|---|---|---|
-    | 0–5 | joint angles | rad | [-6.28, -6.28, -3.14, -6.28, -6.28, -6.28] | [6.28, 6.28, 3.14, 6.28, 6.28, 6.28] | θ, inside the joint limits |
+    | 0–5 | joint angles | rad | [-6.33, -6.33, -3.19, -6.33, -6.33, -6.33] | [6.33, 6.33, 3.19, 6.33, 6.33, 6.33] | θ, the joint limits ± 0.05 (soft limits overshoot) |
     | 6–8 | end-effector position | m | [-1.14, -1.14, -1.14] | [1.14, 1.14, 1.14] | p_e, world frame, from the engine |
     | 9–11 | target position | m | [-0.05, -0.5 , -0.05] | [0.95, 0.5 , 0.95] | p_t, world frame |
     | 12–17 | joint velocities | rad/s | [-6.3, -6.3, -6.3, -6.4, -6.4, -6.4] | [6.3, 6.3, 6.3, 6.4, 6.4, 6.4] | θ̇, bounded by twice the URDF limits |
@@ -86,6 +86,12 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     ## Version history
 
     * v0: initial version (the paper's env with the joint-limit rule made optional).
+      Kept as v0 (its id is public API) through these changes, none of which changes the
+      bundled arm's seeded trajectories: the observed joint angles' bounds widened by
+      0.05 rad (MuJoCo's soft limits overshoot slightly); positions in the world frame
+      (the same as the base frame unless ``base_position``/``base_orientation`` are given);
+      for a ``urdf`` without a given ``home``, the start pose chosen clear of the ground;
+      joints off the chain held; truncation owned by Gymnasium's ``TimeLimit``.
     """
 
 

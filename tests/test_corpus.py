@@ -196,3 +196,26 @@ def test_held_joints_are_reset_and_held(arm: CorpusArm, backend: str) -> None:
         np.testing.assert_allclose(_held_state(world, names), robot.held_positions(robot.home), atol=2e-3)
     finally:
         world.close()
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("arm", _arms())
+def test_observation_is_one_consistent_snapshot(arm: CorpusArm, backend: str) -> None:
+    """The observed end effector is the URDF's forward kinematics of the observed joint angles."""
+    env = gym.make("armreach/Reach-v0", urdf=_path(arm), backend=backend)
+    try:
+        task, robot = env.unwrapped.task, env.unwrapped.robot
+        parts = task.layout.slices
+        obs, _ = env.reset(seed=3)
+        rng = np.random.default_rng(3)
+        worst = 0.0
+        for _ in range(30):
+            obs, _, terminated, truncated, _ = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
+            q = obs[parts["joint angles"]].astype(np.float64)
+            ee = obs[parts["end-effector position"]].astype(np.float64)
+            worst = max(worst, float(np.max(np.abs(robot.forward_kinematics(q) - ee))))
+            if terminated or truncated:
+                obs, _ = env.reset()
+        assert worst < 1e-6, f"{arm.name} on {backend}: {worst:.2e} m"  # float32's precision at arm scale
+    finally:
+        env.close()

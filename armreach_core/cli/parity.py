@@ -29,26 +29,23 @@ def add_parser(sub: Any) -> None:
         "--configs", type=int, default=1000, help="random configurations for the FK check (default: 1000)"
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of configurations, actions, target (default: 0)")
+    parser.add_argument(
+        "--corpus", action="store_true", help="every installed arm of the corpus: one folder each and one table"
+    )
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: runs/parity-<time>)")
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.corpus:
+        return _corpus(args)
     robot = robot_kwargs(args)
     urdf, ee_link = robot.pop("urdf", None), robot.pop("ee_link", None)
     report = run_parity(
         args.backends, urdf, ee_link, steps=args.steps, configs=args.configs, seed=args.seed, env_kwargs=robot
     )
     out: Path = args.out or Path("runs") / time.strftime("parity-%Y%m%d-%H%M%S")
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "report.md").write_text(markdown(report))
-    (out / "parity.json").write_text(json.dumps(report.to_json(), indent=1) + "\n")
-    saved = [out / "report.md", out / "parity.json"]
-    try:
-        plot(report, out / "parity.png")
-        saved.append(out / "parity.png")
-    except ImportError:
-        print("no parity.png: plots need matplotlib (`pip install 'armreach[rl]'` or `pip install matplotlib`)")
+    saved = _write(report, out)
     for name, kin in report.kinematic.items():
         print(f"{name:>10}  FK max error {kin.max_m:.1e} m   {report.steps_per_second(name):,.0f} env steps/s")
     for name in report.backends[1:]:
@@ -62,6 +59,67 @@ def run(args: argparse.Namespace) -> int:
     print("PASS: every number is within tolerance" if not failures else "FAIL: " + "; ".join(failures))
     print("saved " + ", ".join(str(path) for path in saved))
     return 0 if not failures else 1
+
+
+def _corpus(args: argparse.Namespace) -> int:
+    """Parity over every installed corpus arm: one folder per arm and one table (markdown and JSON)."""
+    from armreach_core.corpus import CORPUS
+
+    out: Path = args.out or Path("runs") / time.strftime("parity-corpus-%Y%m%d-%H%M%S")
+    rows: dict[str, Any] = {}
+    for arm in CORPUS:
+        if arm.path is None:
+            print(f"{arm.name}: not installed ({arm.install})")
+            continue
+        report = run_parity(args.backends, str(arm.path), steps=args.steps, configs=args.configs, seed=args.seed)
+        _write(report, out / arm.name)
+        gaps = {
+            f"{sequence}/{name}": {
+                "ee_rms_mm": 1e3 * report.gap(sequence, name).ee_rms_m,
+                "ee_max_mm": 1e3 * report.gap(sequence, name).ee_max_m,
+                "joint_rms_rad": report.gap(sequence, name).joint_rms_rad,
+            }
+            for sequence in report.trajectories
+            for name in report.backends[1:]
+        }
+        rows[arm.name] = {
+            "fk_max_m": {name: kin.max_m for name, kin in report.kinematic.items()},
+            "gaps": gaps,
+            "failures": report.failures(),
+        }
+        print(f"{arm.name}: {'pass' if not report.failures() else 'fail'}")
+    lines = [
+        f"Command: `armreach parity --corpus --steps {args.steps} --seed {args.seed}`",
+        "",
+        "| arm | sequence | end-effector RMS (max) | joint RMS | verdict |",
+        "|---|---|---|---|---|",
+    ]
+    for name, row in rows.items():
+        for key, gap in row["gaps"].items():
+            verdict = "pass" if not row["failures"] else "fail"
+            lines.append(
+                f"| {name} | {key} | {gap['ee_rms_mm']:.1f} mm ({gap['ee_max_mm']:.1f}) | "
+                f"{gap['joint_rms_rad']:.3f} rad | {verdict} |"
+            )
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "corpus.md").write_text("\n".join(lines) + "\n")
+    (out / "corpus.json").write_text(json.dumps(rows, indent=1) + "\n")
+    print("\n".join(lines))
+    print(f"saved {out / 'corpus.md'}, {out / 'corpus.json'} and one folder per arm")
+    return 0 if all(not row["failures"] for row in rows.values()) else 1
+
+
+def _write(report: ParityReport, out: Path) -> list[Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "report.md").write_text(markdown(report))
+    (out / "parity.json").write_text(json.dumps(report.to_json(), indent=1) + "\n")
+    saved = [out / "report.md", out / "parity.json"]
+    try:
+        plot(report, out / "parity.png")
+        saved.append(out / "parity.png")
+    except ImportError:
+        print("no parity.png: plots need matplotlib (`pip install 'armreach[rl]'` or `pip install matplotlib`)")
+    return saved
 
 
 def plot(report: ParityReport, path: Path) -> None:
