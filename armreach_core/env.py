@@ -168,6 +168,11 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
 
     # -- helpers -----------------------------------------------------------------------
     @property
+    def elapsed_steps(self) -> int:
+        """Steps taken since the last reset."""
+        return self._elapsed
+
+    @property
     def backend(self) -> Backend:
         """The live backend; raises once the env is closed."""
         if self._backend is None:

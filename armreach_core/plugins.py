@@ -97,7 +97,7 @@ class PluginHost:
         self._registry: Registry | None = None
         self._listeners: list[Callable[[Registry], None]] = []
         if load_entry_points:
-            self._load_entry_points(entry_points(group=ENTRY_POINT_GROUP))
+            self.load_entry_points(entry_points(group=ENTRY_POINT_GROUP))
 
     # -- loading -----------------------------------------------------------------------
     def _fail(self, name: str, stage: str, error: BaseException | str) -> None:
@@ -107,7 +107,12 @@ class PluginHost:
         self.failures.append(failure)
         warnings.warn(str(failure), PluginLoadWarning, stacklevel=3)
 
-    def _load_entry_points(self, eps: Iterable[EntryPoint]) -> None:
+    def load_entry_points(self, eps: Iterable[EntryPoint]) -> None:
+        """Import and register the plugins of ``eps`` (the ``armreach`` group's entry points by default).
+
+        A plugin that fails to import or to register is recorded in :attr:`failures` and warned
+        about; the others still load.
+        """
         disabled = _disabled_names()
         for ep in sorted(eps, key=lambda e: e.name):
             dist = ep.dist.name if ep.dist is not None else None

@@ -272,13 +272,13 @@ def test_docstring_table_matches_the_code():
 def test_actions_of_the_wrong_dtype_raise_and_leave_state_untouched(env, bad):
     env.reset(seed=0)
     before = env.unwrapped.backend.read_state()
-    elapsed = env.unwrapped._elapsed
+    elapsed = env.unwrapped.elapsed_steps
     with pytest.raises(ActionError):
         env.step(bad)
     after = env.unwrapped.backend.read_state()
     np.testing.assert_array_equal(before.q, after.q)
     np.testing.assert_array_equal(before.qd, after.qd)
-    assert env.unwrapped._elapsed == elapsed
+    assert env.unwrapped.elapsed_steps == elapsed
     # integer and float32 arrays and plain lists are fine; values beyond ±1 are clipped
     for good in (np.zeros(6, dtype=np.int64), np.zeros(6, dtype=np.float32), [0.0] * 6):
         env.step(good)

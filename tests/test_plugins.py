@@ -121,7 +121,7 @@ def test_broken_entry_point_is_reported_and_others_load():
     broken = EntryPoint(name="broken", value="armreach_no_such_module_xyz", group="armreach")
     host = PluginHost(load_entry_points=False)
     with pytest.warns(PluginLoadWarning, match="plugin 'broken' failed during import"):
-        host._load_entry_points([broken, good])
+        host.load_entry_points([broken, good])
     assert "reach" in host.registry.tasks
     assert [f.name for f in host.failures] == ["broken"]
     assert "ModuleNotFoundError" in host.failures[0].error
@@ -141,7 +141,7 @@ def test_plugin_raising_in_a_hook_is_reported(monkeypatch):
     host = PluginHost(load_entry_points=False)
     good = EntryPoint(name="armreach", value="armreach_core.default_plugins", group="armreach")
     raiser = EntryPoint(name="raiser", value="armreach_test_raiser", group="armreach")
-    host._load_entry_points([good, raiser])
+    host.load_entry_points([good, raiser])
     with pytest.warns(PluginLoadWarning, match="raiser.*boom"):
         registry = host.registry
     assert "reach" in registry.tasks

@@ -27,7 +27,7 @@ def test_envs_in_one_process_do_not_interfere():
     alone_a = _rollout(ArmReach6DOFEnv(), 1, 30)
     alone_b = _rollout(ArmReach6DOFEnv(), 2, 30)
     env_a, env_b = ArmReach6DOFEnv(), ArmReach6DOFEnv()
-    assert env_a.unwrapped.backend._client != env_b.unwrapped.backend._client
+    assert env_a.unwrapped.backend.client != env_b.unwrapped.backend.client
     obs_a, _ = env_a.reset(seed=1)
     obs_b, _ = env_b.reset(seed=2)
     rng_a, rng_b = np.random.default_rng(1), np.random.default_rng(2)
@@ -43,7 +43,7 @@ def test_envs_in_one_process_do_not_interfere():
 
 def test_close_disconnects_and_is_idempotent():
     env = ArmReach6DOFEnv()
-    client = env.unwrapped.backend._client
+    client = env.unwrapped.backend.client
     assert pb.isConnected(physicsClientId=client)
     env.close()
     assert not pb.isConnected(physicsClientId=client)
@@ -62,7 +62,7 @@ def test_create_step_close_cycles_leak_no_clients_or_memory():
         env.reset(seed=0)
         for _ in range(5):
             env.step(env.action_space.sample())
-        client = env.unwrapped.backend._client
+        client = env.unwrapped.backend.client
         env.close()
         return client
 
