@@ -22,6 +22,7 @@ import numpy.typing as npt
 from lxml import etree
 
 from armreach_core.errors import ConfigError, URDFError
+from armreach_core.placement import rotation
 
 if TYPE_CHECKING:
     from armreach_core.robot import RobotModel
@@ -194,17 +195,11 @@ def _geometry(resolved_xml: bytes) -> _Geometry:
 
 
 def _motion(kind: str, axis: FloatArray, value: FloatArray) -> FloatArray:
-    out = np.broadcast_to(np.eye(4), (*value.shape, 4, 4)).copy()
     if kind == "prismatic":
+        out = np.broadcast_to(np.eye(4), (*value.shape, 4, 4)).copy()
         out[..., :3, 3] = value[..., None] * axis
         return out
-    x, y, z = axis
-    c, s = np.cos(value), np.sin(value)
-    t = 1.0 - c
-    out[..., 0, 0], out[..., 0, 1], out[..., 0, 2] = t * x * x + c, t * x * y - s * z, t * x * z + s * y
-    out[..., 1, 0], out[..., 1, 1], out[..., 1, 2] = t * x * y + s * z, t * y * y + c, t * y * z - s * x
-    out[..., 2, 0], out[..., 2, 1], out[..., 2, 2] = t * x * z - s * y, t * y * z + s * x, t * z * z + c
-    return out
+    return rotation(axis, value)
 
 
 def _base_transform(robot: RobotModel) -> FloatArray:

@@ -17,8 +17,9 @@ import numpy.typing as npt
 
 from armreach_core.backend import Backend
 from armreach_core.errors import BackendUnavailableError, ConfigError
+from armreach_core.placement import base_pose
 from armreach_core.plugins import PluginHost, get_host
-from armreach_core.robot import RobotModel, base_pose
+from armreach_core.robot import RobotModel
 from armreach_core.specs import BackendProbes, BackendSpec, RobotSpec, TaskSpec
 from armreach_core.urdf import allow_external_meshes_default
 

@@ -26,6 +26,7 @@ import numpy.typing as npt
 
 from armreach_core.anatomy import MOVABLE_TYPES, Tree, default_end_effector
 from armreach_core.errors import ConfigError, URDFError
+from armreach_core.placement import base_pose, pose_matrix, rotation
 from armreach_core.urdf import ParsedURDF, read_urdf
 
 FloatArray = npt.NDArray[np.float64]
@@ -88,58 +89,6 @@ class HeldJoint:
     position: float
     effort: float
     mimic: Mimic | None = None
-
-
-def base_pose(
-    position: npt.ArrayLike | None = None, orientation: npt.ArrayLike | None = None
-) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
-    """A checked base placement: ``(x, y, z)`` in m and a unit quaternion ``(w, x, y, z)``.
-
-    ``None`` means the origin, or no rotation. The quaternion is normalized.
-
-    Raises:
-        ConfigError: not three finite numbers, or not four finite numbers that are not all zero.
-    """
-    pos = _numbers(position, 3, "base_position", "three finite numbers (x, y, z) in metres, such as (0, 0, 0.5)")
-    quat = _numbers(
-        orientation, 4, "base_orientation", "a quaternion of four finite numbers (w, x, y, z), such as (1, 0, 0, 0)"
-    )
-    if pos is None:
-        pos = np.zeros(3)
-    if quat is None:
-        quat = np.array([1.0, 0.0, 0.0, 0.0])
-    norm = float(np.linalg.norm(quat))
-    if not norm > 1e-9:
-        raise ConfigError(
-            f"base_orientation={orientation!r} is all zero; give a quaternion (w, x, y, z), e.g. (1, 0, 0, 0)"
-        )
-    w, x, y, z = (float(v) for v in quat / norm)
-    return (float(pos[0]), float(pos[1]), float(pos[2])), (w, x, y, z)
-
-
-def _numbers(value: npt.ArrayLike | None, size: int, what: str, expected: str) -> FloatArray | None:
-    if value is None:
-        return None
-    try:
-        array = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{what}={value!r} must be {expected}") from None
-    if array.shape != (size,) or not np.all(np.isfinite(array)):
-        raise ConfigError(f"{what}={value!r} must be {expected}")
-    return array
-
-
-def pose_matrix(position: tuple[float, float, float], orientation: tuple[float, float, float, float]) -> FloatArray:
-    """The 4x4 transform of a position and a unit quaternion ``(w, x, y, z)``."""
-    w, x, y, z = orientation
-    transform = np.eye(4)
-    transform[:3, :3] = [
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ]
-    transform[:3, 3] = position
-    return transform
 
 
 @dataclass(frozen=True)
@@ -544,7 +493,7 @@ class RobotModel:
                 motion = np.broadcast_to(np.eye(4), (*batch, 4, 4)).copy()
                 motion[..., :3, 3] = angle[..., None] * element.axis
             else:
-                motion = _rotation(element.axis, angle)
+                motion = rotation(element.axis, angle)
             transform = transform @ motion
         return transform, joint_frames
 
@@ -582,23 +531,3 @@ class RobotModel:
 
     def __repr__(self) -> str:
         return f"RobotModel({self.name!r}, joints={list(self.joint_names)}, ee_link={self.ee_link!r})"
-
-
-def _rotation(axis: FloatArray, angle: FloatArray) -> FloatArray:
-    """Homogeneous rotations about a fixed unit ``axis`` by a batch of angles (Rodrigues)."""
-    x, y, z = axis
-    c = np.cos(angle)
-    s = np.sin(angle)
-    t = 1.0 - c
-    out = np.zeros((*np.shape(angle), 4, 4))
-    out[..., 0, 0] = t * x * x + c
-    out[..., 0, 1] = t * x * y - s * z
-    out[..., 0, 2] = t * x * z + s * y
-    out[..., 1, 0] = t * x * y + s * z
-    out[..., 1, 1] = t * y * y + c
-    out[..., 1, 2] = t * y * z - s * x
-    out[..., 2, 0] = t * x * z - s * y
-    out[..., 2, 1] = t * y * z + s * x
-    out[..., 2, 2] = t * z * z + c
-    out[..., 3, 3] = 1.0
-    return out
