@@ -7,6 +7,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
+
 
 def add_parser(sub: Any) -> None:
     parser = sub.add_parser("bench", help="benchmark every backend: JSON plus a markdown table")
@@ -20,6 +22,7 @@ def add_parser(sub: Any) -> None:
         help="timed SB3 training steps per algorithm, or 'none' (default: %(default)s)",
     )
     parser.add_argument("--out", type=Path, default=None, help="write bench.json and bench.md into this folder")
+    add_robot_arguments(parser)
     parser.set_defaults(run=run)
 
 
@@ -45,7 +48,13 @@ def run(args: argparse.Namespace) -> int:
 
         measure_sb3 = bench_sb3
     results = run_bench(
-        backends, steps=args.steps, repeats=args.repeats, vector=not args.no_vector, sb3_steps=sb3, sb3=measure_sb3
+        backends,
+        steps=args.steps,
+        repeats=args.repeats,
+        vector=not args.no_vector,
+        sb3_steps=sb3,
+        sb3=measure_sb3,
+        env_kwargs=robot_kwargs(args),
     )
     table = to_markdown(results)
     print(table)

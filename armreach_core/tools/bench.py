@@ -13,7 +13,7 @@ import gc
 import os
 import platform
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -105,33 +105,37 @@ def bench_reset(env: ArmEnv, n: int) -> float:
     return 1000.0 * (time.perf_counter() - t0) / n
 
 
-def bench_create(backend: str, n: int) -> float:
-    ArmEnv(backend=backend).close()  # parse and compile once: the cached case is what is measured
+def bench_create(backend: str, n: int, env_kwargs: Mapping[str, Any] | None = None) -> float:
+    kwargs = dict(env_kwargs or {})
+    ArmEnv(backend=backend, **kwargs).close()  # parse and compile once: the cached case is what is measured
     t0 = time.perf_counter()
     for _ in range(n):
-        ArmEnv(backend=backend).close()
+        ArmEnv(backend=backend, **kwargs).close()
     return 1000.0 * (time.perf_counter() - t0) / n
 
 
-def _make(backend: str) -> Callable[[], Any]:
+def _make(backend: str, env_kwargs: Mapping[str, Any] | None = None) -> Callable[[], Any]:
+    kwargs = dict(env_kwargs or {})
+
     def make() -> Any:
-        return ArmEnv(backend=backend)
+        return ArmEnv(backend=backend, **kwargs)
 
     return make
 
 
-def bench_vector(backend: str, workers: int, steps: int) -> float:
+def bench_vector(backend: str, workers: int, steps: int, env_kwargs: Mapping[str, Any] | None = None) -> float:
     """Total env steps/s of a Gymnasium AsyncVectorEnv with ``workers`` processes."""
     from gymnasium.vector import AsyncVectorEnv
 
-    vec = AsyncVectorEnv([_make(backend) for _ in range(workers)], context="spawn")
+    vec = AsyncVectorEnv([_make(backend, env_kwargs) for _ in range(workers)], context="spawn")
     try:
         vec.reset(seed=0)
+        size = int(np.prod(vec.single_action_space.shape or (1,)))
         rng = np.random.default_rng(0)
         for _ in range(20):  # warm up the workers
-            vec.step(rng.uniform(-1, 1, (workers, 6)).astype(np.float32))
+            vec.step(rng.uniform(-1, 1, (workers, size)).astype(np.float32))
         n = max(steps // workers, 1)
-        actions = rng.uniform(-1, 1, (n, workers, 6)).astype(np.float32)
+        actions = rng.uniform(-1, 1, (n, workers, size)).astype(np.float32)
         t0 = time.perf_counter()
         for action in actions:
             vec.step(action)
@@ -148,6 +152,7 @@ def run_bench(
     vector: bool = True,
     sb3_steps: dict[str, int] | None = None,
     sb3: Callable[[str, str, int], float] | None = None,
+    env_kwargs: Mapping[str, Any] | None = None,
     log: Callable[[str], None] = print,
 ) -> list[BackendBench]:
     """Measure every backend.
@@ -159,7 +164,7 @@ def run_bench(
     for name in backends:
         load_backend_class(name)  # a clear error now if the engine is missing
         result = BackendBench(name)
-        env = ArmEnv(backend=name)
+        env = ArmEnv(backend=name, **dict(env_kwargs or {}))
         try:
             gc.collect()
             # Bare loop and env step take turns, so that a burst of other load hits both alike.
@@ -179,14 +184,14 @@ def run_bench(
             result.reset_ms = bench_reset(env, 200)
         finally:
             env.close()
-        result.create_ms = bench_create(name, 20)
+        result.create_ms = bench_create(name, 20, env_kwargs)
         log(
             f"{name}: bare {result.bare_steps_per_s:,.0f} steps/s, env {result.env_steps_per_s:,.0f} steps/s "
             f"({result.step_over_bare:.2f}x), reset {result.reset_ms:.2f} ms, create {result.create_ms:.1f} ms"
         )
         if vector:
             for workers in (1, 2):
-                result.vector_steps_per_s[workers] = bench_vector(name, workers, steps)
+                result.vector_steps_per_s[workers] = bench_vector(name, workers, steps, env_kwargs)
             log(f"{name}: vectorized {result.vector_steps_per_s}")
         if sb3 is not None:
             for algo, n in (sb3_steps or {}).items():
