@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install test test-no-mujoco test-all lint demo bench clean
+.PHONY: install system-deps test test-no-mujoco test-all lint demo bench clean
 
 $(STAMP): pyproject.toml backends/pybullet/pyproject.toml backends/mujoco/pyproject.toml tasks/grasp/pyproject.toml constraints-cpu.txt
 	$(PYTHON) -m venv $(VENV)
@@ -14,9 +14,17 @@ $(STAMP): pyproject.toml backends/pybullet/pyproject.toml backends/mujoco/pyproj
 		-e tasks/grasp
 	touch $(STAMP)
 
-install: $(STAMP)
+# A virtual display for the live-window (render_mode="human") tests, on Debian-like machines where we are root.
+# Best effort: without it those tests skip and everything else runs.
+system-deps:
+	@if ! command -v xvfb-run >/dev/null 2>&1 && [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq xvfb xauth >/dev/null) \
+		|| echo "could not install xvfb: the live-window tests will skip"; \
+	fi
 
-test: $(STAMP)
+install: $(STAMP) system-deps
+
+test: $(STAMP) system-deps
 	$(BIN)/python -m pytest -m "not slow" -q
 
 # The same suite with mujoco unimportable: MuJoCo is optional, so everything else must pass without it.

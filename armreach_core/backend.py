@@ -200,9 +200,11 @@ class Backend(Scene):
     backend's plugin offers them as :class:`~armreach_core.specs.BackendProbes`.
     """
 
-    def __init__(self, robot: RobotModel, physics: PhysicsConfig) -> None:
+    def __init__(self, robot: RobotModel, physics: PhysicsConfig, *, viewer: bool = False) -> None:
         self.robot = robot
         self.physics = physics
+        #: Whether this backend shows its world in a live window (``render_mode="human"``).
+        self.viewer = viewer
 
     @abstractmethod
     def reset_joints(self, q: npt.ArrayLike) -> None:
@@ -231,6 +233,14 @@ class Backend(Scene):
     @abstractmethod
     def close(self) -> None:
         """Release the engine. Safe to call more than once."""
+
+    def show(self, camera: Camera) -> None:
+        """Draw the current state in the live window of a backend built with ``viewer=True``.
+
+        The first call opens the window looking through ``camera``; the user may move the
+        view afterwards. Backends without a live viewer raise :class:`NotImplementedError`.
+        """
+        raise NotImplementedError(f"backend {self.name!r} has no live viewer; use render_mode='rgb_array'")
 
     def diverged(self) -> bool:
         """Whether the last :meth:`step` went numerically unstable and the engine repaired it.

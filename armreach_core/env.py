@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 import os
+import sys
+import time
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -17,7 +19,7 @@ import numpy.typing as npt
 
 from armreach_core.backend import ArmState, Backend, Camera, PhysicsConfig
 from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_ROBOT, DEFAULT_TASK
-from armreach_core.errors import ActionError, ArmReachError, ConfigError
+from armreach_core.errors import ActionError, ArmReachError, ConfigError, DisplayUnavailableError
 from armreach_core.loading import load_backend_class, load_robot, robot_spec, task_spec
 from armreach_core.task import Task
 
@@ -31,6 +33,16 @@ STATE_LIMIT = 1e6
 _ACTION_KINDS = "iuf"
 
 
+def require_display() -> None:
+    """Raise :class:`DisplayUnavailableError`, saying how to get a display, when a window cannot open."""
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise DisplayUnavailableError(
+            "render_mode='human' opens a window, but there is no display (DISPLAY is not set). On a desktop, run "
+            "from its terminal; on a server, run under a virtual display: `apt-get install xvfb` and prefix the "
+            "command with `xvfb-run -a`, or use render_mode='rgb_array' for images without a display"
+        )
+
+
 class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
     """A robot arm doing a registered task on a registered backend.
 
@@ -42,7 +54,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         backend: registered backend name (default :data:`~armreach_core.defaults.DEFAULT_BACKEND`).
         urdf: path to a URDF; default the task's bundled robot.
         ee_link: end-effector link; default the robot's.
-        render_mode: ``None`` or ``"rgb_array"``.
+        render_mode: ``None``, ``"rgb_array"`` (images, no display needed) or ``"human"`` (a
+            live window paced to real time; needs a display, e.g. ``xvfb-run`` on a server).
         robot: a registered robot name instead of ``urdf``.
         home: initial joint configuration (rad); default the robot's home.
         max_joint_step: joint change (rad) for an action of 1, default 0.05.
@@ -65,7 +78,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         **task_options: passed to the task.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 24}  # noqa: RUF012 - Gymnasium's convention
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 24}  # noqa: RUF012 - Gymnasium's convention
 
     def __init__(
         self,
@@ -93,7 +106,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
     ) -> None:
         spec = task_spec(task)
         if render_mode not in (None, *self.metadata["render_modes"]):
-            raise ConfigError(f"render_mode={render_mode!r} is not supported; use None or 'rgb_array'")
+            raise ConfigError(f"render_mode={render_mode!r} is not supported; use None, 'rgb_array' or 'human'")
+        if render_mode == "human":
+            require_display()
         if joint_limit_mode not in JOINT_LIMIT_MODES:
             raise ConfigError(f"joint_limit_mode={joint_limit_mode!r}; use one of {JOINT_LIMIT_MODES}")
         if not (np.isfinite(max_joint_step) and 0 < max_joint_step <= 1.0):
@@ -158,7 +173,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             self.compute_truncated = self._goal_truncated
 
         backend_cls = load_backend_class(backend)
-        self._backend: Backend | None = backend_cls(self.robot, self.physics)
+        self._backend: Backend | None = backend_cls(self.robot, self.physics, viewer=render_mode == "human")
+        self._shown_at = 0.0  # when the live window last showed a step (render_mode="human")
         self.task.setup_scene(self._backend)
         self._state: ArmState | None = None
         self._elapsed = 0
@@ -227,6 +243,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         info = self.task.score(state).info
         if unstable:
             info["physics_unstable"] = True
+        if self.render_mode == "human":
+            self._show()
         return self.task.observation(state), info
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
@@ -250,6 +268,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         info["joint_limit_violation"] = violated
         if unstable:
             info["physics_unstable"] = True
+        if self.render_mode == "human":
+            self._show()
         return self.task.observation(state), score.reward, terminated, truncated, info
 
     def _checked_state(self, backend: Backend, previous: ArmState | None) -> tuple[ArmState, bool]:
@@ -293,9 +313,20 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         return np.zeros(np.shape(np.asarray(achieved_goal))[:-1], dtype=bool)
 
     def render(self) -> npt.NDArray[np.uint8] | None:
+        if self.render_mode == "human":
+            self._show()
+            return None
         if self.render_mode != "rgb_array":
             return None
         return self.backend.render(self.camera)
+
+    def _show(self) -> None:
+        """Draw the state in the live window, paced to real time (one control step per ``control_dt``)."""
+        self.backend.show(self.camera)
+        wait = self._shown_at + self.physics.control_dt - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+        self._shown_at = time.perf_counter()
 
     def close(self) -> None:
         if self._backend is not None:

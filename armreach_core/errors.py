@@ -32,3 +32,7 @@ class MissingExtraError(ArmReachError, ImportError):
 
     The message names the extra to install, e.g. ``pip install 'armreach[rl]'``.
     """
+
+
+class DisplayUnavailableError(ArmReachError):
+    """A live window (``render_mode="human"``) was asked for with no display; the message says how to get one."""

@@ -159,7 +159,7 @@ def test_paper_reward_default_and_options_are_checked(backend):
     with pytest.raises(ConfigError, match="bad option for task"):
         ArmReach6DOFEnv(backend=backend, no_such_option=1)
     with pytest.raises(ConfigError, match="render_mode"):
-        ArmReach6DOFEnv(backend=backend, render_mode="human")
+        ArmReach6DOFEnv(backend=backend, render_mode="window")
 
 
 def test_targets_are_in_the_ball_and_reachable(env):

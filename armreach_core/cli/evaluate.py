@@ -20,6 +20,9 @@ def add_parser(sub: Any) -> None:
     parser.add_argument(
         "--trust", action="store_true", help="load a run another user owns or may write to (its files are pickles)"
     )
+    parser.add_argument(
+        "--viewer", action="store_true", help="watch the episodes in a live window (needs a display); saves nothing"
+    )
     parser.set_defaults(run=run)
 
 
@@ -33,7 +36,12 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         max_episode_steps=args.max_episode_steps,
         trust=args.trust,
+        viewer=args.viewer,
     )
+    if args.viewer:
+        successes = sum(1 for episode in evaluation.episodes if episode.success)
+        print(f"watched {len(evaluation.episodes)} episodes: {successes} succeeded")
+        return 0
     out = args.out or args.run_dir / f"eval-{evaluation.backend}"
     summary = save_evaluation(evaluation, out)
     print(f"controller: {summary['controller']}")

@@ -24,6 +24,9 @@ def add_parser(sub: Any) -> None:
     parser.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
     parser.add_argument("--max-steps", type=int, default=400, help="step limit (default: 400)")
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: runs/rollout-<time>)")
+    parser.add_argument(
+        "--viewer", action="store_true", help="also show the episode in a live window, in real time (needs a display)"
+    )
     parser.set_defaults(run=run)
 
 
@@ -33,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     env = ArmEnv(
         DEFAULT_TASK,
         backend=args.backend,
-        render_mode="rgb_array",
+        render_mode="human" if args.viewer else "rgb_array",
         **robot_kwargs(args),
         max_episode_steps=args.max_steps,
     )
@@ -41,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
         _, info = env.reset(seed=args.seed)
         env.action_space.seed(args.seed)
         policy = IKPolicy(env.robot, env.max_joint_step, restarts=16)
-        frames = [env.render()]
+        frames = [env.backend.render(env.camera)]
         steps, total = 0, 0.0
         while True:
             if args.policy == "ik":
@@ -52,10 +55,10 @@ def run(args: argparse.Namespace) -> int:
             steps += 1
             total += float(reward)
             if steps % 25 == 0:
-                frames.append(env.render())
+                frames.append(env.backend.render(env.camera))
             if terminated or truncated:
                 break
-        frames.append(env.render())
+        frames.append(env.backend.render(env.camera))
     finally:
         env.close()
     picks = [frames[i] for i in np.linspace(0, len(frames) - 1, num=min(4, len(frames))).round().astype(int)]

@@ -176,10 +176,12 @@ def evaluate_run(
     seed: int = 10_000,
     max_episode_steps: int | None = None,
     trust: bool = False,
+    viewer: bool = False,
 ) -> EvaluationResult:
     """Evaluate a run folder on the paper's task (2048-step limit), optionally on another backend.
 
-    ``trust`` loads the model even from a folder another user owns or may write to.
+    ``trust`` loads the model even from a folder another user owns or may write to;
+    ``viewer`` shows the episodes in a live window (``render_mode="human"``, real time).
     """
     config = runs.read_config(run_dir)
     if max_episode_steps is not None:
@@ -188,6 +190,8 @@ def evaluate_run(
         config = dataclasses.replace(config, eval_max_episode_steps=max_episode_steps)
     agent = load_agent(run_dir, config, backend, trust=trust)
     kwargs = env_kwargs(config, backend=backend, evaluation=True)
+    if viewer:
+        kwargs["render_mode"] = "human"
     evaluation = run_episodes(lambda: ArmEnv(**kwargs), agent, episodes, seed)
     evaluation.source = agent.describe() if isinstance(agent, (SB3Agent, IKAgent)) else ""
     return evaluation

@@ -32,6 +32,7 @@ from armreach_mujoco.compiled import CompiledModel, clear_cache, compiled_model
 from armreach_mujoco.engine import mujoco
 from armreach_mujoco.render import Renderer
 from armreach_mujoco.state import StateIO
+from armreach_mujoco.viewer import LiveViewer
 from armreach_mujoco.world import Box, Extras, Marker
 
 #: MuJoCo warnings raised when a step diverges (it then resets the state to the model's defaults).
@@ -48,8 +49,9 @@ class MuJoCoBackend(Backend):
 
     name = "mujoco"
 
-    def __init__(self, robot: RobotModel, physics: PhysicsConfig) -> None:
-        super().__init__(robot, physics)
+    def __init__(self, robot: RobotModel, physics: PhysicsConfig, *, viewer: bool = False) -> None:
+        super().__init__(robot, physics, viewer=viewer)
+        self._window: LiveViewer | None = None
         self._extras = Extras()
         self._closed = False
         self._diverged = False
@@ -71,6 +73,9 @@ class MuJoCoBackend(Backend):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+        if self._window is not None:
+            self._window.close()
+            self._window = None
 
     def _rebuild(self, extras: Extras) -> None:
         self._load(compiled_model(self.robot, self.physics, extras), self._io)
@@ -209,12 +214,23 @@ class MuJoCoBackend(Backend):
             self._renderer = Renderer(self._model)
         return self._renderer.render(self._data, camera)
 
+    def show(self, camera: Camera) -> None:
+        if not self.viewer:
+            raise ArmReachError("this backend has no window; build the env with render_mode='human'")
+        self._live()
+        if self._window is None:
+            self._window = LiveViewer(self._model)
+        self._window.show(self._data, camera)
+
     def close(self) -> None:
         if not self._closed:
             self._closed = True
             if self._renderer is not None:
                 self._renderer.close()
                 self._renderer = None
+            if self._window is not None:
+                self._window.close()
+                self._window = None
 
     def __del__(self) -> None:
         with contextlib.suppress(Exception):

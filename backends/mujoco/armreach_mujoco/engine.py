@@ -1,8 +1,9 @@
 """The ``mujoco`` module, set up for this package: every module here imports mujoco from this one.
 
 * ``MUJOCO_GL`` is read when mujoco is imported, so it is chosen first: unless it is
-  already set, ``egl`` (or ``osmesa``) when that library is found, for offscreen
-  rendering without a display.
+  already set, or a display is there (then MuJoCo's default, GLFW, which its live viewer
+  needs too), ``egl`` (or ``osmesa``) when that library is found, for offscreen rendering
+  without a display.
 * MuJoCo's default warning handler prints and appends to ``MUJOCO_LOG.TXT`` in the current
   folder; a diverging step (reported through ``Backend.diverged``) would litter users'
   folders, so warnings go to the ``armreach.mujoco`` logger instead.
@@ -17,7 +18,7 @@ from typing import Any
 
 
 def _choose_gl() -> None:
-    if "MUJOCO_GL" in os.environ:
+    if "MUJOCO_GL" in os.environ or os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
         return
     if ctypes.util.find_library("EGL"):
         os.environ["MUJOCO_GL"] = "egl"

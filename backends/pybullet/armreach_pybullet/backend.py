@@ -93,9 +93,20 @@ class PyBulletBackend(Backend):
 
     name = "pybullet"
 
-    def __init__(self, robot: RobotModel, physics: PhysicsConfig) -> None:
-        super().__init__(robot, physics)
-        self._client = pb.connect(pb.DIRECT)
+    def __init__(self, robot: RobotModel, physics: PhysicsConfig, *, viewer: bool = False) -> None:
+        super().__init__(robot, physics, viewer=viewer)
+        self._camera_set = False
+        if viewer:
+            with _engine_output_to_log():
+                self._client = pb.connect(pb.GUI)
+            if self._client < 0:
+                raise ArmReachError(
+                    "PyBullet could not open its window: it allows one per process (close the other "
+                    "render_mode='human' env first), and it needs a display with OpenGL"
+                )
+            pb.configureDebugVisualizer(pb.COV_ENABLE_GUI, 0, physicsClientId=self._client)
+        else:
+            self._client = pb.connect(pb.DIRECT)
         if self._client < 0:
             raise ArmReachError("PyBullet could not start a DIRECT client")
         self._markers: dict[str, int] = {}
@@ -402,6 +413,16 @@ class PyBulletBackend(Backend):
         )
         image = np.asarray(rgba, dtype=np.uint8).reshape(camera.height, camera.width, 4)
         return np.ascontiguousarray(image[:, :, :3])
+
+    def show(self, camera: Camera) -> None:
+        """PyBullet's own window draws every step; the first call points its camera."""
+        if not self.viewer:
+            raise ArmReachError("this backend has no window; build the env with render_mode='human'")
+        if not self._camera_set:
+            pb.resetDebugVisualizerCamera(
+                camera.distance, camera.yaw, camera.pitch, list(camera.target), physicsClientId=self._client
+            )
+            self._camera_set = True
 
     def close(self) -> None:
         if self._client >= 0:
