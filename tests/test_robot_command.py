@@ -66,5 +66,9 @@ def test_arm_flags_reach_the_run_and_its_evaluation(tmp_path):
     kwargs = env_kwargs(read_config(run), evaluation=True)
     assert kwargs["base_position"] == [0.0, 0.0, 0.2]
     assert main(["evaluate", str(run), "--episodes", "2"]) == 0
+    summary = json.loads(next(run.glob("eval-*/summary.json")).read_text())
+    assert set(summary["ended_by"]) == {"success", "joint_limit", "time_limit", "physics"}
+    assert sum(summary["ended_by"].values()) == 2  # every episode ended one way
+    assert summary["ended_by"]["success"] == round(2 * summary["success_rate"])
     with pytest.raises(SystemExit):  # a wrong number of values is refused by the parser
         main(["rollout", "--base-position", "0", "0"])

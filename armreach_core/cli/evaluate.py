@@ -44,7 +44,6 @@ def run(args: argparse.Namespace) -> int:
         return 0
     out = args.out or args.run_dir / f"eval-{evaluation.backend}"
     summary = save_evaluation(evaluation, out)
-    print(f"controller: {summary['controller']}")
     print(format_summary(summary))
     print(f"per-episode results: {out / 'episodes.csv'}")
     return 0

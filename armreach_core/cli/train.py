@@ -122,6 +122,19 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
-    print(f"trained {result.timesteps} steps in {result.seconds / 60:.1f} min; model: {run_dir / runs.MODEL}")
-    print(f"evaluate with `armreach evaluate {run_dir}`")
+    from armreach_core.rl.evaluate import table
+
+    rate = result.timesteps / result.seconds if result.seconds > 0 else float("nan")
+    print(
+        table(
+            [
+                ("run", str(run_dir)),
+                ("algorithm", f"{config.algo} ({config.preset} preset) on {config.backend}, seed {config.seed}"),
+                ("env steps", f"{result.timesteps:,} of {result.total:,}"),
+                ("wall time", f"{result.seconds / 60:.1f} min ({rate:,.0f} env steps/s)"),
+                ("model", str(run_dir / runs.MODEL)),
+                ("next", f"armreach evaluate {run_dir}"),
+            ]
+        )
+    )
     return 0

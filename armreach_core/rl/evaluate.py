@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
 
@@ -40,6 +41,23 @@ class Episode:
     episode_return: float
     mean_jerk: float
     joint_limit_violations: int
+    #: How the episode ended: one of :data:`ENDINGS`.
+    ended_by: str = ""
+
+
+#: How an episode can end: the goal reached, a joint limit (the paper's rule), the step limit,
+#: or a physics blow-up.
+ENDINGS = ("success", "joint_limit", "time_limit", "physics")
+
+
+def _ending(info: dict[str, Any], truncated: bool) -> str:
+    if info.get("is_success"):
+        return "success"
+    if info.get("physics_unstable"):
+        return "physics"
+    if truncated:
+        return "time_limit"
+    return "joint_limit" if info.get("joint_limit_violation") else "time_limit"
 
 
 @dataclass
@@ -72,40 +90,48 @@ class EvaluationResult:
             "control_dt": self.control_dt,
             "seconds": self.seconds,
             "controller": self.source,
+            "ended_by": {end: sum(1 for e in self.episodes if e.ended_by == end) for end in ENDINGS},
         }
 
 
 def run_episodes(
-    make_env: Callable[[], ArmEnv],
+    make_env: Callable[[], gym.Env[Any, Any]],
     agent: Agent,
     episodes: int,
     seed: int = 10_000,
     *,
     on_frame: Callable[[int, ArmEnv], None] | None = None,
 ) -> EvaluationResult:
-    """Run ``episodes`` seeded episodes of ``agent`` and record them."""
+    """Run ``episodes`` seeded episodes of ``agent`` and record them.
+
+    ``make_env`` makes an :class:`ArmEnv`, possibly wrapped (robustness perturbations).
+    """
     if episodes < 1:
         raise ConfigError(f"episodes must be >= 1, got {episodes}")
     env = make_env()
+    base = env.unwrapped
+    if not isinstance(base, ArmEnv):
+        env.close()
+        raise ConfigError(f"evaluation needs an armreach env, got {type(base).__name__}")
     records: list[Episode] = []
     traces: list[npt.NDArray[np.float64]] = []
     t0 = time.perf_counter()
     try:
-        dt = env.physics.control_dt
+        dt = base.physics.control_dt
         for i in range(episodes):
             obs, info = env.reset(seed=seed + i)
-            qs = [env.backend.joint_state()[0].copy()]
+            qs = [base.backend.joint_state()[0].copy()]
             total, violations, steps = 0.0, 0, 0
             if on_frame is not None:
-                on_frame(i, env)
+                on_frame(i, base)
             while True:
-                obs, reward, terminated, truncated, info = env.step(agent.act(obs, env))
-                qs.append(env.backend.joint_state()[0].copy())
+                obs, reward, terminated, truncated, info = env.step(agent.act(obs, base))
+                qs.append(base.backend.joint_state()[0].copy())
                 total += float(reward)
                 violations += int(info.get("joint_limit_violation", False))
                 steps += 1
                 if on_frame is not None:
-                    on_frame(i, env)
+                    on_frame(i, base)
                 if terminated or truncated:
                     break
             q = np.asarray(qs)
@@ -113,11 +139,21 @@ def run_episodes(
             if success:
                 traces.append(jerk(q, dt))
             records.append(
-                Episode(i, seed + i, success, steps, float(info["distance"]), total, mean_jerk(q, dt), violations)
+                Episode(
+                    i,
+                    seed + i,
+                    success,
+                    steps,
+                    float(info["distance"]),
+                    total,
+                    mean_jerk(q, dt),
+                    violations,
+                    _ending(info, truncated),
+                )
             )
     finally:
         env.close()
-    return EvaluationResult(env.backend_name, records, dt, _average_trace(traces), time.perf_counter() - t0)
+    return EvaluationResult(base.backend_name, records, dt, _average_trace(traces), time.perf_counter() - t0)
 
 
 def _average_trace(traces: list[npt.NDArray[np.float64]]) -> npt.NDArray[np.float64]:
@@ -214,14 +250,33 @@ def save_evaluation(evaluation: EvaluationResult, out: Path) -> dict[str, Any]:
 
 
 def format_summary(summary: dict[str, Any]) -> str:
+    """One screen: a table of the evaluation's figures, and how the episodes ended."""
     sr = summary["success_rate"]
 
     def spread(mean: float, std: float, digits: int) -> str:
         return "n/a" if sr == 0 else f"{mean:.{digits}f} ± {std:.{digits}f}"
 
-    return (
-        f"{summary['backend']}: success {100 * sr:.0f}% of {summary['episodes']} episodes; "
-        f"steps to goal {spread(summary['steps_to_goal_mean'], summary['steps_to_goal_std'], 1)}; "
-        f"final reward {summary['final_reward_mean']:.2f}; "
-        f"jerk {spread(summary['jerk_mean'], summary['jerk_std'], 2)} rad/s³; {summary['seconds']:.1f} s"
-    )
+    ended = summary.get("ended_by") or {}
+    rows = [
+        ("controller", str(summary.get("controller") or "")),
+        ("backend", str(summary["backend"])),
+        ("episodes", str(summary["episodes"])),
+        ("success", f"{100 * sr:.0f} %"),
+        ("ended by", ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in ended.items()) or "n/a"),
+        ("steps to goal", spread(summary["steps_to_goal_mean"], summary["steps_to_goal_std"], 1)),
+        ("final reward", f"{summary['final_reward_mean']:.2f} ± {summary['final_reward_std']:.2f}"),
+        ("final distance", f"{100 * summary['final_distance_mean']:.1f} cm"),
+        ("jerk", spread(summary["jerk_mean"], summary["jerk_std"], 2) + " rad/s³"),
+        ("wall time", f"{summary['seconds']:.1f} s"),
+    ]
+    return table(rows)
+
+
+def table(rows: list[tuple[str, str]]) -> str:
+    """A two-column box table for the terminal."""
+    left = max(len(k) for k, _ in rows)
+    right = max(len(v) for _, v in rows)
+    lines = [f"┌─{'─' * left}─┬─{'─' * right}─┐"]
+    lines += [f"│ {k:<{left}} │ {v:<{right}} │" for k, v in rows]
+    lines.append(f"└─{'─' * left}─┴─{'─' * right}─┘")
+    return "\n".join(lines)
