@@ -242,6 +242,42 @@ class Backend(Scene):
         """
         raise NotImplementedError(f"backend {self.name!r} has no live viewer; use render_mode='rgb_array'")
 
+    # -- dynamics a robustness study changes (see :mod:`armreach_core.perturb`) --------------
+    # Each setter changes this world only: never another env of the same URDF. Defaults raise
+    # NotImplementedError, so a backend written before them keeps working.
+    def link_mass(self, link: str) -> float:
+        """Mass (kg) of URDF link ``link`` as simulated now."""
+        raise self._unsupported("changing dynamics")
+
+    def set_link_mass(self, link: str, mass: float) -> None:
+        """Give link ``link`` mass ``mass`` (kg); its inertia tensor scales with it (same density)."""
+        raise self._unsupported("changing dynamics")
+
+    def joint_damping(self, joint: str) -> float:
+        """Viscous damping (N·m·s/rad, or N·s/m) of URDF joint ``joint`` as simulated now."""
+        raise self._unsupported("changing dynamics")
+
+    def set_joint_damping(self, joint: str, damping: float) -> None:
+        """Set the viscous damping of joint ``joint`` (torque ``-damping * qd``)."""
+        raise self._unsupported("changing dynamics")
+
+    def effort_limit(self, joint: str) -> float:
+        """Most force or torque (N·m or N) the actuator of joint ``joint`` applies; the URDF effort as built."""
+        raise self._unsupported("changing dynamics")
+
+    def set_effort_limit(self, joint: str, effort: float) -> None:
+        """Bound the actuator of joint ``joint`` to ``effort`` (N·m or N)."""
+        raise self._unsupported("changing dynamics")
+
+    def servo_gain(self, joint: str) -> float:
+        """Position gain of joint ``joint``'s servo relative to the backend's own (1 as built)."""
+        raise self._unsupported("changing dynamics")
+
+    def set_servo_gain(self, joint: str, scale: float) -> None:
+        """Scale the position gain of joint ``joint``'s servo: the fraction of the position error it
+        closes per physics step (PyBullet's ``positionGain``) is ``scale`` times the built one."""
+        raise self._unsupported("changing dynamics")
+
     def diverged(self) -> bool:
         """Whether the last :meth:`step` went numerically unstable and the engine repaired it.
 

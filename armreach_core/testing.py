@@ -151,6 +151,46 @@ class BackendContract:
         assert np.linalg.norm(body.linear_velocity) < 0.01
         assert world.read_state().objects["contract-box"].position[2] == pytest.approx(body.position[2])
 
+    @pytest.mark.parametrize("change", ["mass", "damping", "gain", "effort"])
+    def test_a_dynamics_change_takes_effect_in_this_world_only(
+        self, engine: type[Backend], robot: RobotModel, change: str
+    ) -> None:
+        def apply(world: Backend) -> None:
+            if change == "mass":
+                for link in robot.link_names:
+                    if world.link_mass(link) > 0:
+                        world.set_link_mass(link, 3.0 * world.link_mass(link))
+            for joint in robot.joint_names:
+                if change == "damping":
+                    world.set_joint_damping(joint, 20.0 * world.joint_damping(joint) + 1.0)
+                elif change == "gain":
+                    world.set_servo_gain(joint, 0.3)
+                elif change == "effort":
+                    world.set_effort_limit(joint, 0.1 * world.effort_limit(joint))
+
+        def motion(world: Backend) -> np.ndarray[tuple[int, ...], np.dtype[np.float64]]:
+            world.reset_joints(robot.home)
+            for _ in range(20):
+                world.set_joint_targets(robot.clip(world.joint_state()[0] + 0.05))
+                world.step()
+            return world.joint_state()[0]
+
+        changed, other = engine(robot, PhysicsConfig()), engine(robot, PhysicsConfig())
+        try:
+            try:
+                apply(changed)
+            except NotImplementedError:
+                pytest.skip(f"backend {self.backend!r} cannot change dynamics")
+            assert np.abs(motion(changed) - motion(other)).max() > 1e-3
+            fresh = engine(robot, PhysicsConfig())
+            try:
+                np.testing.assert_array_equal(motion(other), motion(fresh))  # the other world is unaffected
+            finally:
+                fresh.close()
+        finally:
+            changed.close()
+            other.close()
+
     def test_close_twice_is_safe(self, engine: type[Backend], robot: RobotModel) -> None:
         world = engine(robot, PhysicsConfig())
         world.close()

@@ -45,6 +45,7 @@ def env_kwargs(config: RunConfig, *, backend: str | None = None, evaluation: boo
     success radius and the paper's reward; only the action's meaning is kept.
     """
     kwargs = config.env_settings
+    kwargs.pop("randomize", None)  # a wrapper, not an env argument: see make_vec_env
     if evaluation:
         kwargs = {k: v for k, v in kwargs.items() if k in ACTION_SETTINGS + PLACEMENT_SETTINGS}
         kwargs["max_episode_steps"] = config.eval_max_episode_steps
@@ -70,11 +71,17 @@ def make_vec_env(config: RunConfig, run_dir: Path, seed: int, n_envs: int, *, ap
     monitor_dir = run_dir / "monitor"
     monitor_dir.mkdir(parents=True, exist_ok=True)
     kwargs = env_kwargs(config)
+    randomize = config.env_settings.get("randomize")
 
     def factory(i: int) -> Any:
         def make() -> Any:
+            env: Any = ArmEnv(**kwargs)
+            if randomize is not None:  # domain randomization: a perturbation per episode, seeded with the env
+                from armreach_core.perturb import PerturbWrapper, Randomization
+
+                env = PerturbWrapper(env, Randomization.parse(randomize, "env.randomize"))
             return Monitor(
-                ArmEnv(**kwargs),
+                env,
                 str(monitor_dir / str(i)),
                 info_keywords=("is_success", "distance"),
                 override_existing=not append,

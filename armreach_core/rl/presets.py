@@ -97,6 +97,14 @@ def _section(schema: Mapping[str, Any]) -> Check:
     return check
 
 
+def _randomize(key: str, value: Any) -> dict[str, Any]:
+    """Domain randomization: ``{mass: [0.8, 1.2], action_noise: 0.05, ...}`` (see armreach_core.perturb)."""
+    from armreach_core.perturb import Randomization
+
+    Randomization.parse(value, key)
+    return dict(value)
+
+
 ENV_SCHEMA: dict[str, Check] = {
     "max_episode_steps": _num(int, 1),
     "max_joint_step": _num(float, 0.0, 1.0, lo_open=True),
@@ -108,6 +116,8 @@ ENV_SCHEMA: dict[str, Check] = {
     "home": _float_list(None),
     "base_position": _float_list(3),
     "base_orientation": _float_list(4),
+    # a perturbation drawn per training episode (domain randomization)
+    "randomize": _randomize,
 }
 POLICY_SCHEMA: dict[str, Check] = {"net_arch": _int_list, "activation": _choice("relu", "tanh")}
 NOISE_SCHEMA: dict[str, Check] = {

@@ -6,6 +6,7 @@ The package, one job per module:
 * :mod:`~armreach_mujoco.world`: options, contacts, ground, markers, boxes, friction;
 * :mod:`~armreach_mujoco.servo`: position actuators that behave like PyBullet's motor;
 * :mod:`~armreach_mujoco.compiled`: the compiled models, cached and shared read-only;
+* :mod:`~armreach_mujoco.dynamics`: per-env changes of masses, damping, gains (on a model copy);
 * :mod:`~armreach_mujoco.state`: reading and writing one env's ``MjData`` by name;
 * :mod:`~armreach_mujoco.render`: offscreen rendering;
 * this module: the :class:`~armreach_core.backend.Backend` facade over them.
@@ -28,6 +29,7 @@ import numpy.typing as npt
 from armreach_core.backend import ArmState, Backend, BodyState, Camera, PhysicsConfig
 from armreach_core.errors import ArmReachError
 from armreach_core.robot import FloatArray, RobotModel
+from armreach_mujoco import dynamics
 from armreach_mujoco.compiled import CompiledModel, clear_cache, compiled_model
 from armreach_mujoco.engine import mujoco
 from armreach_mujoco.render import Renderer
@@ -56,12 +58,16 @@ class MuJoCoBackend(Backend):
         self._closed = False
         self._diverged = False
         self._renderer: Renderer | None = None
+        self._dynamics = dynamics.Dynamics()  # this env's changes; its model is then its own copy
         self._load(compiled_model(robot, physics), None)
 
     def _load(self, compiled: CompiledModel, old: StateIO | None) -> None:
         self._compiled, self._model = compiled, compiled.model
+        if self._dynamics:
+            self._model = self._dynamics.own_copy(compiled, self.robot)
         self._data = mujoco.MjData(self._model)
         self._io = io = StateIO(self.robot, compiled, self._data)
+        io.model = self._model
         if old is None:
             io.home()
         else:  # something was added to the world: carry the state over, by name
@@ -89,7 +95,10 @@ class MuJoCoBackend(Backend):
     # -- read-only views (diagnostics, tests) -------------------------------------------
     @property
     def model(self) -> Any:
-        """The ``mujoco.MjModel``, shared with every env of the same URDF and settings: do not write it."""
+        """The ``mujoco.MjModel``, shared with every env of the same URDF and settings: do not write it.
+
+        After a change of dynamics (:meth:`set_link_mass`...) it is this env's own copy.
+        """
         return self._model
 
     @property
@@ -147,6 +156,51 @@ class MuJoCoBackend(Backend):
 
     def link_position(self, link: str) -> FloatArray:
         return self._io.link_position(link)
+
+    # -- dynamics (robustness): this env's own model copy, see armreach_mujoco.dynamics ----------
+    def _writable(self) -> Any:
+        """This env's own model, copied from the shared one on the first change."""
+        self._live()
+        if self._model is self._compiled.model:
+            self._model = self._dynamics.own_copy(self._compiled, self.robot)
+            self._io.model = self._model
+            if self._renderer is not None:  # it holds the shared model
+                self._renderer.close()
+                self._renderer = None
+        return self._model
+
+    def link_mass(self, link: str) -> float:
+        return float(self._model.body_mass[dynamics.body(self._compiled, link)])
+
+    def set_link_mass(self, link: str, mass: float) -> None:
+        dynamics.body(self._compiled, link)
+        self._dynamics.masses[link] = float(mass)
+        dynamics.write_mass(self._writable(), self._compiled, link, float(mass))
+
+    def joint_damping(self, joint: str) -> float:
+        return float(self._model.dof_damping[self._compiled.qvel[dynamics.actuated(self.robot, joint)]])
+
+    def set_joint_damping(self, joint: str, damping: float) -> None:
+        dynamics.actuated(self.robot, joint)
+        self._dynamics.dampings[joint] = float(damping)
+        dynamics.write_damping(self._writable(), self._compiled, self.robot, joint, float(damping))
+
+    def effort_limit(self, joint: str) -> float:
+        return float(self._model.actuator_forcerange[self._compiled.actuators[dynamics.actuated(self.robot, joint)], 1])
+
+    def set_effort_limit(self, joint: str, effort: float) -> None:
+        dynamics.actuated(self.robot, joint)
+        self._dynamics.efforts[joint] = float(effort)
+        dynamics.write_effort(self._writable(), self._compiled, self.robot, joint, float(effort))
+
+    def servo_gain(self, joint: str) -> float:
+        act = self._compiled.actuators[dynamics.actuated(self.robot, joint)]
+        return float(self._model.actuator_gainprm[act, 0] / self._compiled.model.actuator_gainprm[act, 0])
+
+    def set_servo_gain(self, joint: str, scale: float) -> None:
+        dynamics.actuated(self.robot, joint)
+        self._dynamics.gains[joint] = float(scale)
+        dynamics.write_gain(self._writable(), self._compiled, self.robot, joint, float(scale))
 
     # -- markers -----------------------------------------------------------------------
     def add_marker(self, name: str, radius: float, rgba: tuple[float, float, float, float]) -> None:

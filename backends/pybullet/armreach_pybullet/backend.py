@@ -168,6 +168,10 @@ class PyBulletBackend(Backend):
         if missing:
             raise ArmReachError(f"PyBullet did not create joints {missing} of {robot.urdf_path}")
         self._joints = [joint_index[name] for name in robot.joint_names]
+        self._actuated = {name: i for i, name in enumerate(robot.joint_names)}
+        # URDF dampings, as loaded (PyBullet does not report a changed one back)
+        self._damping = {j.name: float(j.damping) for j in robot.joints}
+        self._nominal_inertia: dict[str, tuple[float, list[float]]] = {}
         self._ee = self._link_index[robot.ee_link]
         self._forces = [j.effort for j in robot.joints]
         self._kp = [POSITION_GAIN] * robot.dof
@@ -374,6 +378,49 @@ class PyBulletBackend(Backend):
     def set_friction(self, name: str, friction: float) -> None:
         body, link = self._shape(name)
         pb.changeDynamics(body, link, lateralFriction=float(friction), physicsClientId=self._client)
+
+    # -- dynamics (robustness) ----------------------------------------------------------
+    def _actuator(self, joint: str) -> int:
+        """Position of actuated joint ``joint`` in ``robot.joint_names``."""
+        try:
+            return self._actuated[joint]
+        except KeyError:
+            raise ArmReachError(f"joint {joint!r} is not an actuated joint of {self.robot.name!r}") from None
+
+    def link_mass(self, link: str) -> float:
+        return float(pb.getDynamicsInfo(self._body, self.link_index(link), physicsClientId=self._client)[0])
+
+    def set_link_mass(self, link: str, mass: float) -> None:
+        index, cid = self.link_index(link), self._client
+        if link not in self._nominal_inertia:
+            info = pb.getDynamicsInfo(self._body, index, physicsClientId=cid)
+            self._nominal_inertia[link] = (float(info[0]), list(info[2]))
+        nominal_mass, inertia = self._nominal_inertia[link]
+        ratio = float(mass) / nominal_mass if nominal_mass > 0 else 1.0
+        pb.changeDynamics(
+            self._body, index, mass=float(mass), localInertiaDiagonal=[i * ratio for i in inertia], physicsClientId=cid
+        )
+
+    def joint_damping(self, joint: str) -> float:
+        self._actuator(joint)
+        return self._damping[joint]
+
+    def set_joint_damping(self, joint: str, damping: float) -> None:
+        index = self._joints[self._actuator(joint)]
+        pb.changeDynamics(self._body, index, jointDamping=float(damping), physicsClientId=self._client)
+        self._damping[joint] = float(damping)
+
+    def effort_limit(self, joint: str) -> float:
+        return float(self._forces[self._actuator(joint)])
+
+    def set_effort_limit(self, joint: str, effort: float) -> None:
+        self._forces[self._actuator(joint)] = float(effort)  # used from the next set_joint_targets
+
+    def servo_gain(self, joint: str) -> float:
+        return self._kp[self._actuator(joint)] / POSITION_GAIN
+
+    def set_servo_gain(self, joint: str, scale: float) -> None:
+        self._kp[self._actuator(joint)] = POSITION_GAIN * float(scale)
 
     # -- markers and rendering -----------------------------------------------------------
     def add_marker(self, name: str, radius: float, rgba: tuple[float, float, float, float]) -> None:

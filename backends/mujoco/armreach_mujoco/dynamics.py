@@ -1,0 +1,92 @@
+"""Per-env changes to the dynamics (masses, damping, servo gain, effort), on the env's own model copy.
+
+The compiled ``MjModel`` is shared by every env of the same URDF (:mod:`armreach_mujoco.compiled`)
+and is never written. An env whose dynamics change gets its own copy, made on the first
+change; the changes are kept by name, so that a rebuilt model (a marker or a box added
+later) gets them again. Values are computed from the compiled model, never from the
+previous change, so repeated changes do not drift.
+
+* mass: ``body_mass``, with ``body_inertia`` scaled by the same ratio (same density);
+* damping: ``dof_damping``;
+* servo gain: the position term of the servo (``kp`` in ``gainprm[0]`` and
+  ``-biasprm[1]``), which sets the fraction of the error closed per step, as PyBullet's
+  ``positionGain`` does; its damping ``kv`` stays;
+* effort: the actuator's ``forcerange`` and the joint's ``actfrcrange`` (which bounds servo
+  and gravity compensation together).
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from typing import Any
+
+from armreach_core.errors import ArmReachError
+from armreach_core.robot import RobotModel
+from armreach_mujoco.compiled import CompiledModel
+
+
+@dataclass
+class Dynamics:
+    """The changes one env made, by URDF link or joint name (absolute values; gain a scale)."""
+
+    masses: dict[str, float] = field(default_factory=dict)
+    dampings: dict[str, float] = field(default_factory=dict)
+    efforts: dict[str, float] = field(default_factory=dict)
+    gains: dict[str, float] = field(default_factory=dict)
+
+    def __bool__(self) -> bool:
+        return bool(self.masses or self.dampings or self.efforts or self.gains)
+
+    def own_copy(self, compiled: CompiledModel, robot: RobotModel) -> Any:
+        """A copy of ``compiled.model`` with every change written into it."""
+        model = copy.copy(compiled.model)
+        for link in self.masses:
+            write_mass(model, compiled, link, self.masses[link])
+        for joint in self.dampings:
+            write_damping(model, compiled, robot, joint, self.dampings[joint])
+        for joint in self.efforts:
+            write_effort(model, compiled, robot, joint, self.efforts[joint])
+        for joint in self.gains:
+            write_gain(model, compiled, robot, joint, self.gains[joint])
+        return model
+
+
+def body(compiled: CompiledModel, link: str) -> int:
+    try:
+        return compiled.bodies[link]
+    except KeyError:
+        raise ArmReachError(f"link {link!r} is not part of the MuJoCo model") from None
+
+
+def actuated(robot: RobotModel, joint: str) -> int:
+    """Position of ``joint`` in ``robot.joint_names``."""
+    try:
+        return robot.joint_names.index(joint)
+    except ValueError:
+        raise ArmReachError(f"joint {joint!r} is not an actuated joint of {robot.name!r}") from None
+
+
+def write_mass(model: Any, compiled: CompiledModel, link: str, mass: float) -> None:
+    index = body(compiled, link)
+    nominal = float(compiled.model.body_mass[index])
+    ratio = mass / nominal if nominal > 0 else 1.0
+    model.body_mass[index] = mass
+    model.body_inertia[index] = compiled.model.body_inertia[index] * ratio
+
+
+def write_damping(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, damping: float) -> None:
+    model.dof_damping[compiled.qvel[actuated(robot, joint)]] = damping
+
+
+def write_effort(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, effort: float) -> None:
+    i = actuated(robot, joint)
+    model.actuator_forcerange[compiled.actuators[i]] = (-effort, effort)
+    model.jnt_actfrcrange[model.dof_jntid[compiled.qvel[i]]] = (-effort, effort)
+
+
+def write_gain(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, scale: float) -> None:
+    act = compiled.actuators[actuated(robot, joint)]
+    kp = float(compiled.model.actuator_gainprm[act, 0]) * scale
+    model.actuator_gainprm[act, 0] = kp
+    model.actuator_biasprm[act, 1] = -kp
