@@ -143,6 +143,7 @@ def test_train_then_evaluate(
     assert progress["train_seconds"] > 0
 
     assert main(["evaluate", str(run_dir), "--episodes", "2", "--max-episode-steps", "50"]) == 0
+    assert {"eval/success_rate", "eval/mean_reward"} <= _tensorboard_scalars(run_dir)  # as SB3's EvalCallback names
     summary = json.loads((run_dir / "eval-pybullet" / "summary.json").read_text())
     assert summary["episodes"] == 2
     assert 0.0 <= summary["success_rate"] <= 1.0

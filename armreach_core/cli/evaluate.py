@@ -27,7 +27,7 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from armreach_core.rl.evaluate import evaluate_run, format_summary, save_evaluation
+    from armreach_core.rl.evaluate import evaluate_run, format_summary, log_to_tensorboard, save_evaluation
 
     evaluation = evaluate_run(
         args.run_dir,
@@ -44,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     out = args.out or args.run_dir / f"eval-{evaluation.backend}"
     summary = save_evaluation(evaluation, out)
+    log_to_tensorboard(args.run_dir, summary)
     print(format_summary(summary))
     print(f"per-episode results: {out / 'episodes.csv'}")
     return 0

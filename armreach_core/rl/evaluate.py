@@ -280,3 +280,24 @@ def table(rows: list[tuple[str, str]]) -> str:
     lines += [f"│ {k:<{left}} │ {v:<{right}} │" for k, v in rows]
     lines.append(f"└─{'─' * left}─┴─{'─' * right}─┘")
     return "\n".join(lines)
+
+
+def log_to_tensorboard(run_dir: Path, summary: dict[str, Any]) -> Path | None:
+    """Write the evaluation as SB3's ``EvalCallback`` names it (``eval/success_rate``, ``eval/mean_reward``)
+    into the run's TensorBoard folder, at the run's step count.
+
+    Returns the folder written, or ``None`` for a run without TensorBoard logs (``ik``).
+    """
+    if not (run_dir / "tb").is_dir():
+        return None
+    from stable_baselines3.common.logger import configure
+
+    from armreach_core.rl.checkpoints import read_progress
+
+    folder = run_dir / "tb" / f"eval-{summary['backend']}"
+    logger = configure(str(folder), ["tensorboard"])
+    logger.record("eval/success_rate", float(summary["success_rate"]))
+    logger.record("eval/mean_reward", float(summary["final_reward_mean"]))
+    logger.dump(step=int(read_progress(run_dir).get("timesteps", 0)))
+    logger.close()
+    return folder
