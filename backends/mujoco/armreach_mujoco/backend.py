@@ -76,12 +76,7 @@ class MuJoCoBackend(Backend):
         self._half_dt = 0.5 * timestep
         # what the clock advances by in one control step, less half a physics step of slack
         self._step_span = (self.physics.substeps - 0.5) * timestep
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-        if self._window is not None:
-            self._window.close()
-            self._window = None
+        self._close_views()  # they drew the old model
 
     def _rebuild(self, extras: Extras) -> None:
         self._load(compiled_model(self.robot, self.physics, extras), self._io)
@@ -276,15 +271,19 @@ class MuJoCoBackend(Backend):
             self._window = LiveViewer(self._model)
         self._window.show(self._data, camera)
 
+    def _close_views(self) -> None:
+        """Release the offscreen renderer and the live window (each opens again when next used)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        if self._window is not None:
+            self._window.close()
+            self._window = None
+
     def close(self) -> None:
         if not self._closed:
             self._closed = True
-            if self._renderer is not None:
-                self._renderer.close()
-                self._renderer = None
-            if self._window is not None:
-                self._window.close()
-                self._window = None
+            self._close_views()
 
     def __del__(self) -> None:
         with contextlib.suppress(Exception):
