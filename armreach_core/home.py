@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
-from lxml import etree
 
+from armreach_core.anatomy import Tree
 from armreach_core.errors import ConfigError, URDFError
 from armreach_core.placement import rotation
 
@@ -73,29 +73,6 @@ class _Geometry:
     neighbours: frozenset[tuple[str, str]]  # link pairs that may touch (joined by a joint or a fixed chain)
 
 
-def _rpy(rpy: tuple[float, float, float]) -> FloatArray:
-    r, p, y = rpy
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
-
-
-def _origin(element: Any) -> FloatArray:
-    transform = np.eye(4)
-    origin = element.find("origin") if element is not None else None
-    if origin is not None:
-        xyz = [float(v) for v in (origin.get("xyz") or "0 0 0").split()]
-        rpy = [float(v) for v in (origin.get("rpy") or "0 0 0").split()]
-        transform[:3, :3] = _rpy((rpy[0], rpy[1], rpy[2]))
-        transform[:3, 3] = xyz
-    return transform
-
-
 @functools.lru_cache(maxsize=128)
 def _mesh_points(filename: str, scale: tuple[float, float, float]) -> FloatArray | None:
     import trimesh
@@ -113,68 +90,56 @@ def _mesh_points(filename: str, scale: tuple[float, float, float]) -> FloatArray
 
 
 def _shape_points(geometry: Any) -> FloatArray | None:
-    shape = geometry[0] if len(geometry) else None
-    if shape is None:
+    """Points of a yourdfpy collision geometry in its own frame (``None``: nothing to check)."""
+    if geometry is None:
         return None
-    if shape.tag == "box":
-        half = np.array([float(v) for v in shape.get("size", "0 0 0").split()]) / 2
+    if geometry.box is not None:
         corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64)
-        return corners * half
-    if shape.tag == "sphere":
-        r = float(shape.get("radius", "0"))
+        return corners * (np.asarray(geometry.box.size, dtype=np.float64) / 2)
+    if geometry.sphere is not None:
+        r = float(geometry.sphere.radius)
         return np.vstack([np.eye(3) * r, -np.eye(3) * r])
-    if shape.tag == "cylinder":
-        r, length = float(shape.get("radius", "0")), float(shape.get("length", "0"))
+    if geometry.cylinder is not None:
+        r, length = float(geometry.cylinder.radius), float(geometry.cylinder.length)
         angles = np.linspace(0, 2 * math.pi, RIM, endpoint=False)
         rim = np.stack([r * np.cos(angles), r * np.sin(angles)], axis=1)
         return np.vstack([np.column_stack([rim, np.full(RIM, z)]) for z in (-length / 2, length / 2)])
-    if shape.tag == "mesh":
-        scale = tuple(float(v) for v in (shape.get("scale") or "1 1 1").split())
-        return _mesh_points(shape.get("filename", ""), (scale[0], scale[1], scale[2]))
+    if geometry.mesh is not None:
+        scale = np.broadcast_to(np.asarray(1.0 if geometry.mesh.scale is None else geometry.mesh.scale, float), 3)
+        return _mesh_points(str(geometry.mesh.filename), (float(scale[0]), float(scale[1]), float(scale[2])))
     return None
 
 
 @functools.lru_cache(maxsize=32)
-def _geometry(resolved_xml: bytes) -> _Geometry:
-    root = etree.fromstring(resolved_xml)
-    joints: dict[str, _Joint] = {}
-    for element in root.iter("joint"):
-        if element.getparent() is not root:
-            continue
-        axis = element.find("axis")
-        vector = np.array([float(v) for v in ((axis.get("xyz") if axis is not None else None) or "1 0 0").split()])
-        parent, child = element.find("parent"), element.find("child")
-        joints[element.get("name", "")] = _Joint(
-            name=element.get("name", ""),
-            kind=element.get("type", "fixed"),
-            parent=parent.get("link", "") if parent is not None else "",
-            child=child.get("link", "") if child is not None else "",
-            origin=_origin(element),
-            axis=vector / max(float(np.linalg.norm(vector)), 1e-12),
+def _geometry(robot: RobotModel) -> _Geometry:
+    """The robot's joints in parent-first order and its links' collision points, from its parsed URDF."""
+    urdf = robot.parsed.model.robot
+    links = [str(link.name) for link in urdf.links]
+    tree = Tree(robot.name, robot.root_link, links, urdf.joints)
+    base = robot.root_link
+    order = tuple(
+        _Joint(
+            name=str(joint.name),
+            kind=str(joint.type),
+            parent=str(joint.parent),
+            child=str(joint.child),
+            origin=np.eye(4) if joint.origin is None else np.asarray(joint.origin, dtype=np.float64),
+            axis=_unit(joint.axis),
         )
-    children = {j.child for j in joints.values()}
-    links = [link.get("name", "") for link in root.iter("link") if link.getparent() is root]
-    base = next(name for name in links if name not in children)
-    order: list[_Joint] = []
-    frontier = [base]
-    while frontier:
-        link = frontier.pop(0)
-        for joint in joints.values():
-            if joint.parent == link:
-                order.append(joint)
-                frontier.append(joint.child)
+        for link in tree.order
+        for joint in tree.children[link]
+    )
     points: dict[str, FloatArray] = {}
-    for element in root.iter("link"):
+    for link in urdf.links:
         clouds = []
-        for collision in element.iter("collision"):
-            geometry = collision.find("geometry")
-            local = _shape_points(geometry) if geometry is not None else None
+        for collision in link.collisions:
+            local = _shape_points(collision.geometry)
             if local is None:
                 continue
-            transform = _origin(collision)
+            transform = np.eye(4) if collision.origin is None else np.asarray(collision.origin, dtype=np.float64)
             clouds.append(local @ transform[:3, :3].T + transform[:3, 3])
         if clouds:
-            points[element.get("name", "")] = np.vstack(clouds)
+            points[str(link.name)] = np.vstack(clouds)
     # Rigid groups: links joined by fixed joints move as one body.
     group = {name: name for name in links}
     for joint in order:
@@ -191,7 +156,13 @@ def _geometry(resolved_xml: bytes) -> _Geometry:
             neighbours.add((body, other))
             neighbours.add((other, body))
     pairs = {(x, y) for x in links for y in links if group[x] == group[y] or (group[x], group[y]) in neighbours}
-    return _Geometry(tuple(order), points, grounded, frozenset(pairs))
+    return _Geometry(order, points, grounded, frozenset(pairs))
+
+
+def _unit(axis: Any) -> FloatArray:
+    vector = np.array([1.0, 0.0, 0.0]) if axis is None else np.asarray(axis, dtype=np.float64)
+    unit: FloatArray = vector / max(float(np.linalg.norm(vector)), 1e-12)
+    return unit
 
 
 def _motion(kind: str, axis: FloatArray, value: FloatArray) -> FloatArray:
@@ -202,18 +173,13 @@ def _motion(kind: str, axis: FloatArray, value: FloatArray) -> FloatArray:
     return rotation(axis, value)
 
 
-def _base_transform(robot: RobotModel) -> FloatArray:
-    transform = getattr(robot, "base_transform", None)
-    return np.eye(4) if transform is None else np.asarray(transform, dtype=np.float64)
-
-
 def link_transforms(robot: RobotModel, q: npt.ArrayLike) -> dict[str, FloatArray]:
     """World transforms of every link for joint vectors ``q`` (dof,) or (batch, dof).
 
     Joints the robot does not actuate are where the robot holds them
     (:meth:`~armreach_core.robot.RobotModel.held_positions`: a mimic joint follows its master).
     """
-    geometry = _geometry(robot.parsed.resolved_xml)
+    geometry = _geometry(robot)
     values = np.asarray(q, dtype=np.float64)
     batch = values.shape[:-1]
     index = {name: i for i, name in enumerate(robot.joint_names)}
@@ -222,7 +188,7 @@ def link_transforms(robot: RobotModel, q: npt.ArrayLike) -> dict[str, FloatArray
         np.apply_along_axis(robot.held_positions, -1, values) if held_names else np.zeros((*batch, 0))
     )  # (..., n_held)
     held_index = {name: i for i, name in enumerate(held_names)}
-    base = _base_transform(robot)
+    base = robot.base_transform
     frames: dict[str, FloatArray] = {}
     root = geometry.joints[0].parent if geometry.joints else robot.root_link
     frames[root] = np.broadcast_to(base, (*batch, 4, 4)).copy()
@@ -242,7 +208,7 @@ def link_transforms(robot: RobotModel, q: npt.ArrayLike) -> dict[str, FloatArray
 
 def ground_violations(robot: RobotModel, q: npt.ArrayLike, clearance: float = 0.0) -> dict[str, float]:
     """Moving links whose collision geometry dips below ``clearance`` (m) at ``q``: link -> lowest z."""
-    geometry = _geometry(robot.parsed.resolved_xml)
+    geometry = _geometry(robot)
     frames = link_transforms(robot, q)
     low: dict[str, float] = {}
     for link, points in geometry.points.items():
@@ -299,7 +265,7 @@ def _overlap(a: tuple[FloatArray, FloatArray, FloatArray], b: tuple[FloatArray, 
 
 def self_collisions(robot: RobotModel, q: npt.ArrayLike) -> list[tuple[str, str]]:
     """Pairs of links that are not neighbours whose collision boxes overlap at ``q`` (one configuration)."""
-    geometry = _geometry(robot.parsed.resolved_xml)
+    geometry = _geometry(robot)
     frames = link_transforms(robot, np.asarray(q, dtype=np.float64))
     boxes = _boxes(geometry)
     placed = {}
@@ -335,7 +301,7 @@ def default_home(robot: RobotModel) -> FloatArray:
         URDFError: no candidate keeps the arm above the ground; the message says how far
             to raise the base (``base_position``) or which ``home`` to pass.
     """
-    geometry = _geometry(robot.parsed.resolved_xml)
+    geometry = _geometry(robot)
     zero = _zero(robot)
     rng = np.random.default_rng(0)
     span = np.minimum((robot.upper - robot.lower) / 2, math.pi)
@@ -389,7 +355,7 @@ def check_home(robot: RobotModel, home: npt.ArrayLike) -> None:
 
 def describe(robot: RobotModel, q: npt.ArrayLike) -> dict[str, Any]:
     """Clearance, self-collisions and dexterity of ``q``, for reports."""
-    geometry = _geometry(robot.parsed.resolved_xml)
+    geometry = _geometry(robot)
     values = np.asarray(q, dtype=np.float64)
     lowest = float(_lowest(geometry, link_transforms(robot, values[None, :]))[0])
     return {

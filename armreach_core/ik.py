@@ -39,11 +39,16 @@ def solve(
     return q, float(np.linalg.norm(goal - robot.forward_kinematics(q)))
 
 
+#: Random restarts of the IK reference's solve (``IKPolicy(restarts=RESTARTS)``): what every
+#: caller that wants the reference's behaviour passes.
+RESTARTS = 16
+
+
 def solve_with_restarts(
     robot: RobotModel,
     target: npt.ArrayLike,
     q0: npt.ArrayLike,
-    restarts: int = 16,
+    restarts: int = RESTARTS,
     tolerance: float = 1e-4,
     seed: int = 0,
 ) -> tuple[FloatArray, float]:

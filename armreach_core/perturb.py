@@ -48,6 +48,10 @@ from armreach_core.errors import ConfigError
 PHYSICAL = ("mass", "damping", "gain", "effort")
 #: Option key of :meth:`PerturbWrapper.reset` for a one-episode perturbation.
 OPTION = "perturbation"
+#: Defaults of a robustness sweep (``armreach robustness``): episodes per cell, and their
+#: length (shorter than the paper's 2048 steps, which make failing cells slow).
+DEFAULT_EPISODES = 10
+DEFAULT_MAX_STEPS = 200
 _SALT = 0x5EED  # keeps the wrapper's stream apart from the env's, seeded with the same number
 
 

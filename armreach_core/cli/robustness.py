@@ -7,9 +7,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-#: Defaults of the sweep (``armreach_core.rl.robustness`` uses these; importing it needs the rl extra).
-DEFAULT_EPISODES = 10
-DEFAULT_MAX_STEPS = 200
+from armreach_core.perturb import DEFAULT_EPISODES, DEFAULT_MAX_STEPS
 
 
 def add_parser(sub: Any) -> None:

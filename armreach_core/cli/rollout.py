@@ -13,7 +13,7 @@ import numpy as np
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.env import ArmEnv
-from armreach_core.ik import IKPolicy
+from armreach_core.ik import RESTARTS, IKPolicy
 
 
 def add_parser(sub: Any) -> None:
@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         _, info = env.reset(seed=args.seed)
         env.action_space.seed(args.seed)
-        policy = IKPolicy(env.robot, env.max_joint_step, restarts=16)
+        policy = IKPolicy(env.robot, env.max_joint_step, restarts=RESTARTS)
         frames = [env.backend.render(env.camera)]
         steps, total = 0, 0.0
         while True:

@@ -17,7 +17,7 @@ import numpy.typing as npt
 
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
-from armreach_core.ik import IKPolicy
+from armreach_core.ik import RESTARTS, IKPolicy
 from armreach_core.rl.config import RunConfig
 
 if TYPE_CHECKING:
@@ -178,10 +178,6 @@ class SB3Agent:
         return np.asarray(action, dtype=np.float32)
 
 
-#: Restarts of the IK reference's inverse-kinematics solve (see :class:`~armreach_core.ik.IKPolicy`).
-IK_RESTARTS = 16
-
-
 class IKAgent:
     """Inverse kinematics from the URDF model (no learning): a planned joint-space move, then DLS."""
 
@@ -190,11 +186,11 @@ class IKAgent:
         self._policy: IKPolicy | None = None
 
     def describe(self) -> str:
-        return f"IK with {IK_RESTARTS} restarts, then damped least squares (damping {self.damping})"
+        return f"IK with {RESTARTS} restarts, then damped least squares (damping {self.damping})"
 
     def act(self, obs: Any, env: ArmEnv) -> npt.NDArray[np.float32]:
         if self._policy is None or self._policy.robot is not env.robot:
-            self._policy = IKPolicy(env.robot, env.max_joint_step, damping=self.damping, restarts=IK_RESTARTS)
+            self._policy = IKPolicy(env.robot, env.max_joint_step, damping=self.damping, restarts=RESTARTS)
         target = getattr(env.task, "target", None)
         if target is None:
             raise ConfigError(f"the IK controller needs a task with a target position; {env.task_name!r} has none")

@@ -20,10 +20,9 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-from armreach_core.cli.robustness import DEFAULT_EPISODES, DEFAULT_MAX_STEPS
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
-from armreach_core.perturb import Perturbation, PerturbWrapper, with_value
+from armreach_core.perturb import DEFAULT_EPISODES, DEFAULT_MAX_STEPS, Perturbation, PerturbWrapper, with_value
 from armreach_core.rl import runs
 from armreach_core.rl.agents import env_kwargs
 from armreach_core.rl.evaluate import load_agent, run_episodes

@@ -24,7 +24,7 @@ from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ArmReachError
 from armreach_core.home import describe
-from armreach_core.ik import IKPolicy
+from armreach_core.ik import RESTARTS, IKPolicy
 from armreach_core.loading import load_backend_class
 from armreach_core.plugins import available_backends
 
@@ -84,8 +84,7 @@ def _robot_facts(report: RobotReport, env: ArmEnv) -> None:
         {"name": j.name, "type": j.type, "lower": j.lower, "upper": j.upper, "effort": j.effort, "velocity": j.velocity}
         for j in robot.joints
     ]
-    held = getattr(robot, "held_joints", ())
-    report.held_joints = [str(getattr(j, "name", j)) for j in held]
+    report.held_joints = [joint.name for joint in robot.held_joints]
     report.home = [float(v) for v in robot.home]
     facts = describe(robot, robot.home)
     report.home_lowest_m = facts["lowest_link_m"]
@@ -123,7 +122,7 @@ def _ik(env: ArmEnv, episodes: int, seed: int) -> tuple[float, float]:
     successes, steps = 0, []
     for i in range(episodes):
         env.reset(seed=seed + i)
-        policy = IKPolicy(env.robot, env.max_joint_step, restarts=16)
+        policy = IKPolicy(env.robot, env.max_joint_step, restarts=RESTARTS)
         target = env.task.target  # type: ignore[attr-defined]
         for step in range(1, 400):
             q = env.backend.read_state().q
