@@ -261,6 +261,15 @@ class Backend(Scene):
         """Set the viscous damping of joint ``joint`` (torque ``-damping * qd``)."""
         raise self._unsupported("changing dynamics")
 
+    def joint_friction(self, joint: str) -> float:
+        """Coulomb (dry) friction of URDF joint ``joint`` (N·m, or N) as simulated now; 0 as built."""
+        raise self._unsupported("changing dynamics")
+
+    def set_joint_friction(self, joint: str, friction: float) -> None:
+        """Give joint ``joint`` Coulomb friction: a torque of at most ``friction`` against its motion,
+        which holds it still against any smaller torque."""
+        raise self._unsupported("changing dynamics")
+
     def effort_limit(self, joint: str) -> float:
         """Most force or torque (N·m or N) the actuator of joint ``joint`` applies; the URDF effort as built."""
         raise self._unsupported("changing dynamics")

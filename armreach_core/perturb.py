@@ -10,6 +10,8 @@ key            meaning                                                    nomina
 =============  =========================================================  ======================
 mass           every link's mass (and inertia) times this                 1
 damping        every actuated joint's viscous damping times this          1 (the URDF's)
+friction       every actuated joint's Coulomb friction, as a fraction of  0
+               its URDF effort limit (0.1: a tenth of its torque)
 gain           every servo's position gain times this                     1
 effort         every actuator's effort limit times this                   1 (the URDF's)
 obs_noise      std of Gaussian noise on what the agent observes (its      0
@@ -21,8 +23,9 @@ tolerance      the task's success threshold (m)                           the ta
 =============  =========================================================  ======================
 
 The physical keys go through the backend's dynamics methods (by URDF name), so each
-engine changes its own world only. Joint friction is not offered: PyBullet ignores
-URDF joint friction, so the engines could not honour it alike.
+engine changes its own world only. Friction is a constraint on both engines (MuJoCo's
+``frictionloss``; on PyBullet, which ignores URDF joint friction, a bounded velocity
+constraint solved with the servo): it holds a joint still against any smaller torque.
 
 Seeding: the wrapper's generator is separate from the env's (targets are drawn exactly
 as without the wrapper) and is seeded by ``reset(seed=...)``; the same seed gives the
@@ -45,7 +48,7 @@ import numpy.typing as npt
 from armreach_core.errors import ConfigError
 
 #: Keys that change the physics (scales of the robot's nominal values).
-PHYSICAL = ("mass", "damping", "gain", "effort")
+PHYSICAL = ("mass", "damping", "friction", "gain", "effort")
 #: Option key of :meth:`PerturbWrapper.reset` for a one-episode perturbation.
 OPTION = "perturbation"
 #: Defaults of a robustness sweep (``armreach robustness``): episodes per cell, and their
@@ -61,6 +64,7 @@ class Perturbation:
 
     mass: float = 1.0
     damping: float = 1.0
+    friction: float = 0.0
     gain: float = 1.0
     effort: float = 1.0
     obs_noise: float = 0.0
@@ -156,10 +160,11 @@ class PerturbWrapper(gym.Wrapper[Any, Any, Any, Any]):
         self._nominal = {
             "mass": {link: backend.link_mass(link) for link in self._links},
             "damping": {j: backend.joint_damping(j) for j in robot.joint_names},
+            "friction": {j: backend.effort_limit(j) for j in robot.joint_names},
             "effort": {j: backend.effort_limit(j) for j in robot.joint_names},
             "gain": {j: backend.servo_gain(j) for j in robot.joint_names},
         }
-        self._applied = {key: 1.0 for key in PHYSICAL}
+        self._applied = {key: float(getattr(Perturbation(), key)) for key in PHYSICAL}
         self._threshold = getattr(base.task, "success_threshold", None)
         self._queue: deque[Any] = deque()
 
@@ -169,6 +174,7 @@ class PerturbWrapper(gym.Wrapper[Any, Any, Any, Any]):
         setters = {
             "mass": backend.set_link_mass,
             "damping": backend.set_joint_damping,
+            "friction": backend.set_joint_friction,
             "effort": backend.set_effort_limit,
             "gain": backend.set_servo_gain,
         }

@@ -151,7 +151,7 @@ class BackendContract:
         assert np.linalg.norm(body.linear_velocity) < 0.01
         assert world.read_state().objects["contract-box"].position[2] == pytest.approx(body.position[2])
 
-    @pytest.mark.parametrize("change", ["mass", "damping", "gain", "effort"])
+    @pytest.mark.parametrize("change", ["mass", "damping", "friction", "gain", "effort"])
     def test_a_dynamics_change_takes_effect_in_this_world_only(
         self, engine: type[Backend], robot: RobotModel, change: str
     ) -> None:
@@ -163,6 +163,8 @@ class BackendContract:
             for joint in robot.joint_names:
                 if change == "damping":
                     world.set_joint_damping(joint, 20.0 * world.joint_damping(joint) + 1.0)
+                elif change == "friction":
+                    world.set_joint_friction(joint, 2.0 * world.effort_limit(joint))
                 elif change == "gain":
                     world.set_servo_gain(joint, 0.3)
                 elif change == "effort":

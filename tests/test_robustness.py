@@ -20,6 +20,7 @@ from tests.conftest import BACKENDS
 STRONG = {
     "mass": 2.0,
     "damping": 20.0,
+    "friction": 0.5,
     "gain": 0.5,
     "effort": 0.2,
     "obs_noise": 0.02,
@@ -161,3 +162,32 @@ def test_domain_randomized_preset_trains(tmp_path: Path) -> None:
     assert (run_dir / "model.zip").is_file()
     monitor = (run_dir / "monitor" / "0.monitor.csv").read_text(encoding="utf-8").splitlines()
     assert len(monitor) > 3  # episodes were played under randomization
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_joint_friction_holds_against_weaker_torques_and_yields_to_stronger(backend: str) -> None:
+    """Coulomb friction above the servo's effort keeps the heavy joints still; well below it, the servo wins."""
+    env = ArmEnv(backend=backend)
+    try:
+        robot, world = env.robot, env.backend
+        heavy = np.argsort([-j.effort for j in robot.joints])[:3]  # the proximal joints
+
+        def travel(fraction: float) -> npt.NDArray[np.float64]:
+            for joint in robot.joint_names:
+                world.set_joint_friction(joint, fraction * world.effort_limit(joint))
+                assert world.joint_friction(joint) == pytest.approx(fraction * world.effort_limit(joint))
+            world.reset_joints(robot.home)
+            target = robot.clip(robot.home + 0.3)
+            for _ in range(60):
+                world.set_joint_targets(target)
+                world.step()
+            moved: npt.NDArray[np.float64] = np.abs(world.joint_state()[0] - robot.home)
+            return moved
+
+        free, stuck, weak = travel(0.0), travel(2.0), travel(0.05)
+        assert free[heavy].min() > 0.2
+        assert stuck[heavy].max() < 0.02, stuck
+        assert weak[heavy].min() > 0.2
+        np.testing.assert_allclose(travel(0.0), free, atol=1e-9)  # friction off again: as before
+    finally:
+        env.close()

@@ -31,6 +31,7 @@ from armreach_core.rl.evaluate import load_agent, run_episodes
 GRIDS: Mapping[str, tuple[float, ...]] = {
     "mass": (0.5, 1.0, 1.5, 2.0, 3.0),
     "damping": (0.0, 1.0, 10.0, 40.0),
+    "friction": (0.0, 0.1, 0.3, 0.6, 1.0),
     "gain": (0.25, 0.5, 1.0, 2.0),
     "effort": (0.05, 0.1, 0.25, 1.0),
     "obs_noise": (0.0, 0.01, 0.03, 0.1),
@@ -41,6 +42,7 @@ GRIDS: Mapping[str, tuple[float, ...]] = {
 UNITS = {
     "mass": "× nominal",
     "damping": "× URDF damping",
+    "friction": "× URDF effort",
     "gain": "× servo gain",
     "effort": "× URDF effort",
     "obs_noise": "std",

@@ -180,6 +180,14 @@ class MuJoCoBackend(Backend):
         self._dynamics.dampings[joint] = float(damping)
         dynamics.write_damping(self._writable(), self._compiled, self.robot, joint, float(damping))
 
+    def joint_friction(self, joint: str) -> float:
+        return float(self._model.dof_frictionloss[self._compiled.qvel[dynamics.actuated(self.robot, joint)]])
+
+    def set_joint_friction(self, joint: str, friction: float) -> None:
+        dynamics.actuated(self.robot, joint)
+        self._dynamics.frictions[joint] = float(friction)
+        dynamics.write_friction(self._writable(), self._compiled, self.robot, joint, float(friction))
+
     def effort_limit(self, joint: str) -> float:
         return float(self._model.actuator_forcerange[self._compiled.actuators[dynamics.actuated(self.robot, joint)], 1])
 

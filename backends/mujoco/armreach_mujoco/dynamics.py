@@ -1,4 +1,4 @@
-"""Per-env changes to the dynamics (masses, damping, servo gain, effort), on the env's own model copy.
+"""Per-env changes to the dynamics (masses, damping, friction, servo gain, effort), on the env's own model copy.
 
 The compiled ``MjModel`` is shared by every env of the same URDF (:mod:`armreach_mujoco.compiled`)
 and is never written. An env whose dynamics change gets its own copy, made on the first
@@ -8,6 +8,7 @@ previous change, so repeated changes do not drift.
 
 * mass: ``body_mass``, with ``body_inertia`` scaled by the same ratio (same density);
 * damping: ``dof_damping``;
+* friction: ``dof_frictionloss``, MuJoCo's Coulomb friction, solved as a constraint;
 * servo gain: the position term of the servo (``kp`` in ``gainprm[0]`` and
   ``-biasprm[1]``), which sets the fraction of the error closed per step, as PyBullet's
   ``positionGain`` does; its damping ``kv`` stays;
@@ -25,6 +26,12 @@ from armreach_core.errors import ArmReachError
 from armreach_core.robot import RobotModel
 from armreach_mujoco.compiled import CompiledModel
 
+#: Friction constraint: time constant in physics steps (2 is MuJoCo's stability floor), and
+#: the solver impedance (``solimp``'s first two values: MuJoCo's ceiling; its defaults, 0.9 and
+#: 0.95, let a joint held by twice its effort in friction creep 0.25 rad in a second).
+FRICTION_SOLREF_STEPS = 2.0
+FRICTION_IMPEDANCE = (0.9999, 0.9999)
+
 
 @dataclass
 class Dynamics:
@@ -32,11 +39,12 @@ class Dynamics:
 
     masses: dict[str, float] = field(default_factory=dict)
     dampings: dict[str, float] = field(default_factory=dict)
+    frictions: dict[str, float] = field(default_factory=dict)
     efforts: dict[str, float] = field(default_factory=dict)
     gains: dict[str, float] = field(default_factory=dict)
 
     def __bool__(self) -> bool:
-        return bool(self.masses or self.dampings or self.efforts or self.gains)
+        return bool(self.masses or self.dampings or self.frictions or self.efforts or self.gains)
 
     def own_copy(self, compiled: CompiledModel, robot: RobotModel) -> Any:
         """A copy of ``compiled.model`` with every change written into it."""
@@ -45,6 +53,8 @@ class Dynamics:
             write_mass(model, compiled, link, self.masses[link])
         for joint in self.dampings:
             write_damping(model, compiled, robot, joint, self.dampings[joint])
+        for joint in self.frictions:
+            write_friction(model, compiled, robot, joint, self.frictions[joint])
         for joint in self.efforts:
             write_effort(model, compiled, robot, joint, self.efforts[joint])
         for joint in self.gains:
@@ -77,6 +87,16 @@ def write_mass(model: Any, compiled: CompiledModel, link: str, mass: float) -> N
 
 def write_damping(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, damping: float) -> None:
     model.dof_damping[compiled.qvel[actuated(robot, joint)]] = damping
+
+
+def write_friction(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, friction: float) -> None:
+    dof = compiled.qvel[actuated(robot, joint)]
+    model.dof_frictionloss[dof] = friction
+    # MuJoCo's default friction constraint is soft (time constant 0.02 s, impedance 0.9-0.95):
+    # it lets a joint creep at forces below the bound. The stiffest stable setting makes it
+    # hold as PyBullet's hard constraint does.
+    model.dof_solref[dof] = (FRICTION_SOLREF_STEPS * float(model.opt.timestep), 1.0)
+    model.dof_solimp[dof, :2] = FRICTION_IMPEDANCE
 
 
 def write_effort(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, effort: float) -> None:

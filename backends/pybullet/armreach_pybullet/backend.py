@@ -2,7 +2,8 @@
 
 Position control uses PyBullet's own motor (``POSITION_CONTROL``) with
 ``positionGain`` :data:`POSITION_GAIN`, ``velocityGain`` :data:`VELOCITY_GAIN` and each
-joint's URDF effort limit as the maximum force. Joint damping comes from the URDF.
+joint's URDF effort limit as the maximum force. Joint damping comes from the URDF; joint
+friction, set for robustness studies, is a constraint (:mod:`armreach_pybullet.friction`).
 
 The robot's root link is placed at the robot's base pose. Joints the arm does not actuate
 (``robot.held_joints``: fingers...) are reset with the arm and held by the same motor; a
@@ -27,6 +28,7 @@ import numpy.typing as npt
 from armreach_core.backend import NO_OBJECTS, ArmState, Backend, BodyState, Camera, PhysicsConfig
 from armreach_core.errors import ArmReachError, URDFError
 from armreach_core.robot import FloatArray, RobotModel
+from armreach_pybullet.friction import JointFriction
 
 POSITION_GAIN = 0.2
 VELOCITY_GAIN = 1.0
@@ -186,6 +188,7 @@ class PyBulletBackend(Backend):
         self._mimic_gain = np.array([m.multiplier for _, m in followers if m is not None])
         self._mimic_offset = np.array([m.offset for _, m in followers if m is not None])
         self._follower_forces = [self._held_forces[self._held.index(index)] for index in self._followers]
+        self._friction = JointFriction(cid, body, self._joints)
 
     # -- engine handles (for probes and tests; read-only) ---------------------------------
     @property
@@ -229,6 +232,7 @@ class PyBulletBackend(Backend):
         values = np.asarray(q, dtype=np.float64)
         for joint, value in zip(self._joints, values, strict=True):
             pb.resetJointState(body, joint, float(value), 0.0, physicsClientId=cid)
+        self._friction.reset()
         if self._held:
             held = self.robot.held_positions(values)
             for joint, value in zip(self._held, held, strict=True):
@@ -409,6 +413,12 @@ class PyBulletBackend(Backend):
         index = self._joints[self._actuator(joint)]
         pb.changeDynamics(self._body, index, jointDamping=float(damping), physicsClientId=self._client)
         self._damping[joint] = float(damping)
+
+    def joint_friction(self, joint: str) -> float:
+        return self._friction.values[self._actuator(joint)]
+
+    def set_joint_friction(self, joint: str, friction: float) -> None:
+        self._friction.set(self._actuator(joint), friction)
 
     def effort_limit(self, joint: str) -> float:
         return float(self._forces[self._actuator(joint)])
