@@ -43,7 +43,7 @@ def test_bench_command_writes_json_and_table(tmp_path, capsys) -> None:
     for key in ("bare_steps_per_s", "env_steps_per_s", "reset_ms", "create_ms"):
         assert np.isfinite(row[key]) and row[key] > 0
     assert row["step_over_bare"] == pytest.approx(row["bare_steps_per_s"] / row["env_steps_per_s"])
-    assert row["vector_steps_per_s"] == {} and row["sb3_steps_per_s"] == {}
+    assert row["vector_steps_per_s"] == {} and row["training_steps_per_s"] == {}
     table = (out / "bench.md").read_text()
     assert "| env step cost / bare loop cost (target ≤ 1.25) |" in table
     assert table in capsys.readouterr().out
@@ -52,6 +52,8 @@ def test_bench_command_writes_json_and_table(tmp_path, capsys) -> None:
 def test_bench_rejects_bad_options(capsys) -> None:
     assert main(["bench", "--sb3", "a2c=5"]) == 2
     assert "expected ALGO=N" in capsys.readouterr().err
+    assert main(["bench", "--learners", "sb3,keras"]) == 2
+    assert "use one or more of sb3, sbx" in capsys.readouterr().err
 
 
 @pytest.mark.slow
@@ -61,4 +63,6 @@ def test_bench_vectorized_and_sb3_measurements(tmp_path) -> None:
     assert main([*argv, "--out", str(out)]) == 0
     (row,) = json.loads((out / "bench.json").read_text())["backends"]
     assert set(row["vector_steps_per_s"]) == {"1", "2"}
-    assert row["sb3_steps_per_s"]["ppo"] > 0 and row["sb3_steps_per_s"]["ddpg"] > 0
+    speeds = row["training_steps_per_s"]
+    assert set(speeds) == {"sb3 ppo", "sbx ppo", "sb3 ddpg", "sbx ddpg"}
+    assert all(value > 0 for value in speeds.values())

@@ -40,7 +40,14 @@ def test_experiment_writes_the_report_and_figures(tmp_path: Path) -> None:
     assert re.search(r"\| PPO \| 177 ± 25 \|", text)
     assert re.search(r"\| DDPG \| 69 / \d+ ± \d+ \|", text)
     assert re.search(r"\| DLS inverse kinematics \(reference\) \| – \| 100 \|", text)
-    for name in ("learning_curves.png", "jerk.png", "rollout.png", "rollout.gif"):
+    # Over seeds: the interquartile mean with its bootstrap interval, and how episodes ended.
+    over_seeds = text.split("## Over seeds")[1].split("## Figures")[0]
+    for r, label in zip(results, ("PPO", "DDPG"), strict=True):
+        row = next(line for line in over_seeds.splitlines() if line.startswith(f"| {label} |"))
+        assert f"| 2 | {r.success_iqm().format(100.0, 0, ' %')} |" in row
+        assert f"time limit {r.ended_by().get('time_limit', 0)}" in row
+        assert sum(r.ended_by().values()) == 4  # 2 seeds x 2 episodes, each counted once
+    for name in ("learning_curves.png", "progress.png", "jerk.png", "rollout.png", "rollout.gif"):
         assert f"]({name})" in text or name == "rollout.gif"
         assert (out / name).stat().st_size > 1000
     with Image.open(out / "rollout.gif") as gif:

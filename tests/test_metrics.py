@@ -78,3 +78,22 @@ def test_steps_to_goal_uses_successes_only() -> None:
     assert MeanStd.of([5.0]).fmt(1) == "5.0"  # one run has no spread to show
     with pytest.raises(ValueError, match="same shape"):
         steps_to_goal([1, 2], [True])
+
+
+def test_iqm_interval_is_scipys_trimmed_mean_with_a_bootstrap_interval() -> None:
+    from scipy import stats
+
+    from armreach_core.rl.stats import iqm, iqm_interval
+
+    values = [0.0, 0.9, 0.95, 1.0, 1.0, 0.97, 0.2, 0.99]
+    assert iqm(values) == pytest.approx(stats.trim_mean(values, 0.25))
+    interval = iqm_interval(values)
+    assert interval.low <= interval.estimate <= interval.high and interval.n == 8
+    assert interval.low >= min(values) and interval.high <= max(values)
+    assert iqm_interval(values) == interval  # seeded: a report is reproducible
+    # A failed seed moves the IQM less than the mean.
+    assert abs(iqm([1, 1, 1, 0]) - 1) < abs(np.mean([1, 1, 1, 0]) - 1)
+    one = iqm_interval([0.5])
+    assert (one.estimate, one.low, one.high) == (0.5, 0.5, 0.5)
+    assert iqm_interval([1.0, 1.0, 1.0]).format(100.0, 0, " %") == "100 % [100, 100]"
+    assert iqm_interval([]).format() == "n/a"

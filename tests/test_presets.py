@@ -59,9 +59,9 @@ def test_paper_models_are_built_with_those_settings(tmp_path: Path) -> None:
 
     from armreach_core.rl.agents import build_model, make_vec_env
 
-    for algo in ("ppo", "ddpg"):
-        config = resolve_config(algo=algo, preset="paper")
-        env = make_vec_env(config, tmp_path / algo, 0, 1, append=False)
+    for algo, learner in (("ppo", "sb3"), ("ddpg", "sb3"), ("ddpg", "sbx")):
+        config = resolve_config(algo=algo, preset="paper", learner=learner)
+        env = make_vec_env(config, tmp_path / f"{algo}-{learner}", 0, 1, append=False)
         model = build_model(algo, config.settings, env, 0, None, "cpu")
         assert model.gamma == 0.99
         assert model.batch_size == 300
@@ -76,8 +76,14 @@ def test_paper_models_are_built_with_those_settings(tmp_path: Path) -> None:
             assert model.learning_rate == 1e-3
             assert isinstance(model.action_noise, OrnsteinUhlenbeckActionNoise)
             assert _ou_sigma(model.action_noise, n_actions=6) == pytest.approx(0.1, rel=0.05)
-            layers = [m for m in model.actor.mu if isinstance(m, torch.nn.Linear)]
-            assert [m.out_features for m in layers][:2] == [256, 256]
+            if learner == "sb3":
+                layers = [m for m in model.actor.mu if isinstance(m, torch.nn.Linear)]
+                assert [m.out_features for m in layers][:2] == [256, 256]
+            else:
+                import flax.linen as nn
+
+                assert model.policy.actor.net_arch == model.policy.qf.net_arch == [256, 256]
+                assert model.policy.actor.activation_fn is nn.relu
         env.close()
 
 

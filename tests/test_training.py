@@ -110,9 +110,18 @@ def _monitor_rows(run_dir: Path) -> list[list[str]]:
     return rows
 
 
-@pytest.mark.parametrize(("algo", "extra"), [("ppo", []), ("ddpg", []), ("td3", []), ("sac", []), ("sac", ["--her"])])
+@pytest.mark.parametrize(
+    ("algo", "extra", "learner"),
+    [
+        ("ppo", [], "sb3"),
+        ("ddpg", [], "sbx"),
+        ("td3", ["--learner", "sb3"], "sb3"),
+        ("sac", ["--learner", "sb3"], "sb3"),
+        ("sac", ["--her"], "sbx"),
+    ],
+)
 def test_train_then_evaluate(
-    tmp_path: Path, tiny: str, algo: str, extra: list[str], capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, tiny: str, algo: str, extra: list[str], learner: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
     run_dir = tmp_path / "run"
     assert main(["train", "--algo", algo, "--preset", tiny, "--seed", "3", "--out", str(run_dir), *extra]) == 0
@@ -124,6 +133,7 @@ def test_train_then_evaluate(
     assert (config["algo"], config["seed"], config["preset"]) == (algo, 3, "tiny")
     assert config["settings"]["policy"]["net_arch"] == [16, 16]
     assert ("her" in config["settings"]) == ("--her" in extra)
+    assert config["settings"]["learner"] == learner  # SBX by default off-policy, SB3 for PPO
     assert (
         "armreach train --algo" in (run_dir / "command.txt").read_text()
         or "train" in (run_dir / "command.txt").read_text()
@@ -156,14 +166,15 @@ def test_train_then_evaluate(
 
 @pytest.mark.parametrize("algo", ["ddpg", "td3", "sac"])
 def test_off_policy_agents_use_fused_adam_also_after_loading(tmp_path: Path, tiny: str, algo: str) -> None:
-    from armreach_core.rl.agents import algo_class, build_model, make_vec_env
+    from armreach_core.rl.agents import build_model, make_vec_env
     from armreach_core.rl.config import resolve_config
+    from armreach_core.rl.learners import algo_class
 
-    config = resolve_config(algo=algo, preset=tiny)
+    config = resolve_config(algo=algo, preset=tiny, learner="sb3")
     env = make_vec_env(config, tmp_path, 0, 1, append=False)
     model = build_model(algo, config.settings, env, 0, None, "cpu")
     model.save(tmp_path / "model.zip")
-    loaded = algo_class(algo).load(tmp_path / "model.zip", env=env, device="cpu")
+    loaded = algo_class(algo, "sb3").load(tmp_path / "model.zip", env=env, device="cpu")
     for agent in (model, loaded):
         assert agent.actor.optimizer.defaults["fused"] is True
         assert agent.critic.optimizer.defaults["fused"] is True
@@ -326,10 +337,11 @@ def test_run_seeds_give_disjoint_env_seeds() -> None:
 
 def _assert_run_readable(run_dir: Path) -> int:
     """Every file of a (possibly killed) off-policy run folder reads back; returns the checkpoint's step count."""
-    from stable_baselines3 import DDPG
+    from armreach_core.rl.learners import algo_class
 
     config = runs.read_config(run_dir)
     assert config.algo == "ddpg"
+    DDPG = algo_class("ddpg", config.learner)
     assert "train" in (run_dir / "command.txt").read_text(encoding="utf-8")
     assert "versions" in json.loads((run_dir / "environment.json").read_text(encoding="utf-8"))
     progress = json.loads((run_dir / "checkpoint.json").read_text(encoding="utf-8"))
@@ -470,14 +482,18 @@ def test_runs_other_users_could_have_written_are_refused_unless_trusted(
 
 def test_a_run_folder_in_todays_format_reads_back_evaluates_and_resumes(tmp_path: Path, tiny: str) -> None:
     run_dir = tmp_path / "run"
-    assert main(["train", "--algo", "ddpg", "--preset", tiny, "--steps", "150", "--out", str(run_dir)]) == 0
+    command = ["train", "--algo", "ddpg", "--preset", tiny, "--steps", "150", "--learner", "sb3"]
+    assert main([*command, "--out", str(run_dir)]) == 0
     todays = TODAYS_CONFIG.format(preset=Path(tiny).resolve())
-    assert (run_dir / "config.yaml").read_text() == todays  # the format has not changed
+    # the format has not changed; runs now record their learner
+    assert (run_dir / "config.yaml").read_text() == todays + "  learner: sb3\n"
+    # A run written before learners existed is an SB3 run.
     # A key this version does not know (a newer version's, or a note by hand) is kept and otherwise ignored.
     (run_dir / "config.yaml").write_text(todays + "note: by hand\n")
     config = runs.read_config(run_dir)
     assert (config.algo, config.timesteps, config.n_envs, config.settings["batch_size"]) == ("ddpg", 150, 1, 32)
     assert config.extra == {"note": "by hand"}
+    assert config.learner == "sb3"
     assert RunConfig.from_dict(config.to_dict()) == config
     assert main(["evaluate", str(run_dir), "--episodes", "1", "--max-episode-steps", "20"]) == 0
     assert main(["train", "--resume", str(run_dir), "--steps", "250"]) == 0
@@ -574,3 +590,27 @@ raise SystemExit(main(["train", "--preset", "fast", "--steps", "64", "--out", {s
     assert "pip install -e '.[rl]'" in result.stderr
     assert "Traceback" not in result.stderr
     assert not (tmp_path / "run").exists()
+
+
+def test_evaluation_can_clip_at_joint_limits_instead_of_ending(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A controller that drives every joint up: the paper's rule ends each episode at a limit; clipping does not."""
+    from armreach_core.rl import evaluate
+
+    class Push:
+        def act(self, obs: object, env: object) -> np.ndarray:
+            return np.ones(6, dtype=np.float32)
+
+    run_dir = tmp_path / "ik"
+    assert main(["train", "--algo", "ik", "--out", str(run_dir)]) == 0
+    monkeypatch.setattr(evaluate, "load_agent", lambda *args, **kwargs: Push())
+    flags = ["--episodes", "2", "--max-episode-steps", "200"]
+    assert main(["evaluate", str(run_dir), *flags]) == 0
+    assert main(["evaluate", str(run_dir), *flags, "--joint-limit-mode", "clip"]) == 0
+    paper = json.loads((run_dir / "eval-pybullet" / "summary.json").read_text())
+    clip = json.loads((run_dir / "eval-pybullet-clip" / "summary.json").read_text())
+    assert (paper["joint_limit_mode"], clip["joint_limit_mode"]) == ("terminate", "clip")
+    assert paper["ended_by"]["joint_limit"] == 2
+    assert clip["ended_by"]["joint_limit"] == 0 and clip["ended_by"]["time_limit"] == 2
+    assert "│ joint limits   │ clip" in capsys.readouterr().out

@@ -1,4 +1,4 @@
-"""``armreach bench``: env step vs the bare engine loop, reset, creation, vectorized and SB3 throughput."""
+"""``armreach bench``: env step vs the bare engine loop, reset, creation, vectorized and training throughput."""
 
 from __future__ import annotations
 
@@ -19,7 +19,12 @@ def add_parser(sub: Any) -> None:
     parser.add_argument(
         "--sb3",
         default="ppo=4096,ddpg=1000",
-        help="timed SB3 training steps per algorithm, or 'none' (default: %(default)s)",
+        help="timed training steps per algorithm, or 'none' (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--learners",
+        default="sb3,sbx",
+        help="learners whose training speed is measured, side by side (default: %(default)s)",
     )
     parser.add_argument("--out", type=Path, default=None, help="write bench.json and bench.md into this folder")
     add_robot_arguments(parser)
@@ -33,20 +38,27 @@ def run(args: argparse.Namespace) -> int:
 
     backends = args.backends or [b for b in available_backends() if _importable(b)]
     check_backends(backends)
+    from armreach_core.rl.learners import ALGORITHMS, LEARNERS
+
     sb3: dict[str, int] = {}
+    algos = ALGORITHMS["sb3"]
     if args.sb3 != "none":
         for item in args.sb3.split(","):
             algo, _, n = item.partition("=")
-            if algo not in ("ppo", "ddpg", "td3", "sac") or not n.isdigit():
-                raise ConfigError(f"--sb3 {args.sb3!r}: expected ALGO=N[,ALGO=N] with ALGO in ppo, ddpg, td3, sac")
+            if algo not in algos or not n.isdigit():
+                raise ConfigError(f"--sb3 {args.sb3!r}: expected ALGO=N[,ALGO=N] with ALGO in {', '.join(algos)}")
             sb3[algo] = int(n)
+    learners = [name for name in args.learners.split(",") if name]
+    unknown = [name for name in learners if name not in LEARNERS]
+    if unknown or not learners:
+        raise ConfigError(f"--learners {args.learners!r}: use one or more of {', '.join(LEARNERS)}, comma-separated")
     if args.steps < 10 or args.repeats < 1:
         raise ConfigError("--steps must be >= 10 and --repeats >= 1")
     measure_sb3 = None
     if sb3:
-        from armreach_core.rl.throughput import bench_sb3  # needs the rl extra; says so when missing
+        from armreach_core.rl.throughput import bench_training  # needs the rl extra; says so when missing
 
-        measure_sb3 = bench_sb3
+        measure_sb3 = bench_training
     results = run_bench(
         backends,
         steps=args.steps,
@@ -54,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
         vector=not args.no_vector,
         sb3_steps=sb3,
         sb3=measure_sb3,
+        learners=learners,
         env_kwargs=robot_kwargs(args),
     )
     table = to_markdown(results)

@@ -16,7 +16,13 @@ def add_parser(sub: Any) -> None:
     parser.add_argument(
         "--max-episode-steps", type=int, default=None, help="episode limit (default: the run's, 2048 as in the paper)"
     )
-    parser.add_argument("--out", type=Path, default=None, help="output folder (default: RUN/eval-<backend>)")
+    parser.add_argument(
+        "--joint-limit-mode",
+        choices=("terminate", "clip"),
+        default="terminate",
+        help="a joint-limit violation ends the episode (the paper's rule, default) or is clipped away",
+    )
+    parser.add_argument("--out", type=Path, default=None, help="output folder (default: RUN/eval-<backend>[-clip])")
     parser.add_argument(
         "--trust", action="store_true", help="load a run another user owns or may write to (its files are pickles)"
     )
@@ -37,12 +43,14 @@ def run(args: argparse.Namespace) -> int:
         max_episode_steps=args.max_episode_steps,
         trust=args.trust,
         viewer=args.viewer,
+        joint_limit_mode=args.joint_limit_mode,
     )
     if args.viewer:
         successes = sum(1 for episode in evaluation.episodes if episode.success)
         print(f"watched {len(evaluation.episodes)} episodes: {successes} succeeded")
         return 0
-    out = args.out or args.run_dir / f"eval-{evaluation.backend}"
+    clip = "-clip" if args.joint_limit_mode == "clip" else ""
+    out = args.out or args.run_dir / f"eval-{evaluation.backend}{clip}"
     summary = save_evaluation(evaluation, out)
     log_to_tensorboard(args.run_dir, summary)
     print(format_summary(summary))

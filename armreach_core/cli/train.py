@@ -19,7 +19,7 @@ from armreach_core.errors import ConfigError
 
 #: ``--algo`` choices: :data:`armreach_core.rl.presets.ALGOS`, spelled out so that ``--help``
 #: works without the rl extra (a test keeps the two equal).
-ALGOS = ("ppo", "ddpg", "td3", "sac", "ik")
+ALGOS = ("ppo", "ddpg", "td3", "sac", "tqc", "crossq", "ik")
 
 #: Flags that define a run; with --resume they come from the run's config instead.
 RESUME_CONFLICTS = (
@@ -28,6 +28,7 @@ RESUME_CONFLICTS = (
     ("--task", "task", DEFAULT_TASK),
     ("--backend", "backend", DEFAULT_BACKEND),
     ("--her", "her", False),
+    ("--learner", "learner", None),
     ("--seed", "seed", 0),
     ("--n-envs", "n_envs", None),
     ("--urdf", "urdf", None),
@@ -40,7 +41,7 @@ RESUME_CONFLICTS = (
 
 
 def add_parser(sub: Any) -> None:
-    parser = sub.add_parser("train", help="train an agent (Stable-Baselines3) into a run folder")
+    parser = sub.add_parser("train", help="train an agent (Stable-Baselines3 or SBX) into a run folder")
     parser.add_argument(
         "--algo", choices=ALGOS, default=None, help="algorithm (default: the preset's own; ddpg for paper)"
     )
@@ -48,6 +49,12 @@ def add_parser(sub: Any) -> None:
     parser.add_argument("--task", default=DEFAULT_TASK, help="registered task (default: %(default)s)")
     parser.add_argument("--backend", default=DEFAULT_BACKEND, help="physics backend (default: %(default)s)")
     parser.add_argument("--her", action="store_true", help="hindsight experience replay (off-policy algorithms)")
+    parser.add_argument(
+        "--learner",
+        choices=("sb3", "sbx"),
+        default=None,
+        help="library that trains: sb3 (PyTorch) or sbx (JAX) (default: the preset's; else sbx, or sb3 for ppo)",
+    )
     parser.add_argument("--steps", type=int, default=None, help="total env steps (default: the preset's)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     parser.add_argument("--n-envs", type=int, default=None, help="parallel envs (default: the preset's, or 1)")
@@ -103,6 +110,7 @@ def run(args: argparse.Namespace) -> int:
             device=args.device,
             threads=args.threads,
             placement={key: getattr(args, key) for key in ("home", "base_position", "base_orientation")},
+            learner=args.learner,
         )
         her = "-her" if config.uses_her else ""
         name = [config.algo + her, config.preset, config.backend, f"s{config.seed}"]

@@ -1,4 +1,4 @@
-"""Build envs and Stable-Baselines3 agents from validated preset settings.
+"""Build envs and agents (Stable-Baselines3 or SBX: :mod:`armreach_core.rl.learners`) from validated preset settings.
 
 Also the classical reference: :class:`IKAgent`, a damped-least-squares controller that
 acts through the same observations-to-actions interface, so it is evaluated by the
@@ -19,6 +19,7 @@ from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
 from armreach_core.ik import RESTARTS, IKPolicy
 from armreach_core.rl.config import RunConfig
+from armreach_core.rl.learners import LEGACY_LEARNER, activation, algo_class, optimizer_kwargs
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
@@ -94,29 +95,21 @@ def make_vec_env(config: RunConfig, run_dir: Path, seed: int, n_envs: int, *, ap
     return vec
 
 
-def algo_class(algo: str) -> type[BaseAlgorithm]:
-    import stable_baselines3 as sb3
-
-    classes: dict[str, type[BaseAlgorithm]] = {"ppo": sb3.PPO, "ddpg": sb3.DDPG, "td3": sb3.TD3, "sac": sb3.SAC}
-    if algo not in classes:
-        raise ConfigError(f"algorithm {algo!r} is not a learning algorithm; use one of {sorted(classes)}")
-    return classes[algo]
-
-
 def build_model(
     algo: str, settings: Mapping[str, Any], env: Any, seed: int, tb_dir: Path | None, device: str
 ) -> BaseAlgorithm:
-    """A fresh SB3 model for ``algo`` with ``settings`` (validated preset values)."""
-    import torch
+    """A fresh model for ``algo`` with ``settings`` (validated preset values), by the settings' learner."""
     from stable_baselines3 import HerReplayBuffer
     from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 
+    learner = str(settings.get("learner", LEGACY_LEARNER))
+    cls = algo_class(algo, learner)
     policy = settings.get("policy", {})
     policy_kwargs: dict[str, Any] = {}
     if "net_arch" in policy:
         policy_kwargs["net_arch"] = list(policy["net_arch"])
     if "activation" in policy:
-        policy_kwargs["activation_fn"] = {"relu": torch.nn.ReLU, "tanh": torch.nn.Tanh}[policy["activation"]]
+        policy_kwargs["activation_fn"] = activation(learner, policy["activation"])
     kwargs: dict[str, Any] = {
         "policy_kwargs": policy_kwargs,
         "seed": seed,
@@ -133,10 +126,8 @@ def build_model(
                 kwargs[key] = settings[key]
         policy_name = "MlpPolicy"
     else:
-        # Adam's fused kernel: one call per parameter group instead of a dozen small tensor
-        # operations per parameter (DDPG on 2 cores: 69 -> 74-79 env steps/s, docs/benchmarks.md).
-        policy_kwargs["optimizer_kwargs"] = {"fused": True}
-        for key in ("tau", "buffer_size", "learning_starts", "gradient_steps"):
+        policy_kwargs.update(optimizer_kwargs(learner, algo))
+        for key in ("tau", "buffer_size", "learning_starts", "gradient_steps", "policy_delay"):
             if key in settings:
                 kwargs[key] = settings[key]
         if "train_freq" in settings:
@@ -160,7 +151,7 @@ def build_model(
         # The paper's PPO batch (300) does not divide its rollout (2048); SB3 warns and
         # uses a short last mini-batch, which is what the paper's setting means.
         warnings.filterwarnings("ignore", message=".*mini-batch size.*", category=UserWarning)
-        return algo_class(algo)(policy_name, env, **kwargs)
+        return cls(policy_name, env, **kwargs)
 
 
 class SB3Agent:

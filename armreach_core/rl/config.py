@@ -31,6 +31,7 @@ from typing import Any
 
 from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.errors import ConfigError
+from armreach_core.rl.learners import LEGACY_LEARNER, check_learner, check_settings, default_learner
 from armreach_core.rl.presets import ALGOS, OFF_POLICY, RL_ALGOS, load_preset, validate_settings
 
 #: Steps between periodic checkpoints when the preset sets no ``checkpoint_every``.
@@ -189,14 +190,22 @@ class RunConfig:
         return int(self.settings.get("checkpoint_every", DEFAULT_CHECKPOINT_EVERY))
 
     @property
+    def learner(self) -> str:
+        """The library that trains the run (``sb3`` or ``sbx``); runs recorded before learners existed are SB3's."""
+        return str(self.settings.get("learner", LEGACY_LEARNER))
+
+    @property
     def torch_threads(self) -> int:
         """Torch CPU threads the preset asks for; 0 for the default (see ``configure_threads``)."""
         return int(self.settings.get("torch_threads", 0))
 
 
 def default_algo(preset: str, task: str = DEFAULT_TASK) -> str:
-    """The algorithm a preset is for: its only one, else DDPG (the paper's best), else the first."""
-    algos = [a for a in load_preset(preset).algos(task) if a != "ik"]
+    """The algorithm a preset is for: its ``default_algo``, else its only one, else DDPG (the paper's best)."""
+    loaded = load_preset(preset)
+    if loaded.default_algo is not None:
+        return loaded.default_algo
+    algos = [a for a in loaded.algos(task) if a != "ik"]
     if not algos:
         raise ConfigError(f"preset {preset!r} has no learning algorithm for task {task!r}")
     return algos[0] if len(algos) == 1 else ("ddpg" if "ddpg" in algos else algos[0])
@@ -218,6 +227,7 @@ def resolve_config(
     eval_max_episode_steps: int = DEFAULT_EVAL_MAX_EPISODE_STEPS,
     threads: int | None = None,
     placement: Mapping[str, Any] | None = None,
+    learner: str | None = None,
 ) -> RunConfig:
     """The full, explicit config of a new run (what ``config.yaml`` records).
 
@@ -238,6 +248,13 @@ def resolve_config(
         if threads < 1:
             raise ConfigError(f"--threads must be >= 1, got {threads}")
         settings["torch_threads"] = int(threads)
+    if algo in RL_ALGOS:
+        chosen = learner or settings.get("learner") or default_learner(algo)
+        check_learner(chosen, algo)
+        settings["learner"] = chosen
+        check_settings(algo, chosen, settings)
+    elif learner is not None:
+        raise ConfigError(f"--learner applies to learning algorithms, not {algo!r}")
     envs = int(n_envs if n_envs is not None else settings.get("n_envs", 1))
     if not 1 <= envs <= 64:
         raise ConfigError(f"--n-envs must be between 1 and 64, got {envs}")

@@ -21,11 +21,12 @@ import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.env import ArmEnv
+from armreach_core.env import JOINT_LIMIT_MODES, ArmEnv
 from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
-from armreach_core.rl.agents import Agent, IKAgent, SB3Agent, algo_class, env_kwargs
+from armreach_core.rl.agents import Agent, IKAgent, SB3Agent, env_kwargs
 from armreach_core.rl.config import RunConfig
+from armreach_core.rl.learners import algo_class
 from armreach_core.rl.metrics import MeanStd, jerk, mean_jerk, steps_to_goal
 
 
@@ -70,6 +71,8 @@ class EvaluationResult:
     jerk_trace: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     seconds: float = 0.0
     source: str = ""
+    #: What a joint-limit violation does: ``terminate`` (the paper's rule) or ``clip``.
+    joint_limit_mode: str = "terminate"
 
     def summary(self) -> dict[str, Any]:
         successes = [e.success for e in self.episodes]
@@ -90,6 +93,7 @@ class EvaluationResult:
             "control_dt": self.control_dt,
             "seconds": self.seconds,
             "controller": self.source,
+            "joint_limit_mode": self.joint_limit_mode,
             "ended_by": {end: sum(1 for e in self.episodes if e.ended_by == end) for end in ENDINGS},
         }
 
@@ -191,7 +195,7 @@ def load_agent(run_dir: Path, config: RunConfig, backend: str | None = None, *, 
             # HER models need an env with the goal spaces to load; a policy needs nothing else.
             env = ArmEnv(**env_kwargs(config, backend=backend)) if config.uses_her else None
             try:
-                return SB3Agent(algo_class(config.algo).load(path, env=env, device="cpu"), path)
+                return SB3Agent(algo_class(config.algo, config.learner).load(path, env=env, device="cpu"), path)
             except Exception as exc:
                 raise ConfigError(f"cannot load {path}: {exc}; the file is damaged or not an SB3 model") from exc
             finally:
@@ -213,12 +217,17 @@ def evaluate_run(
     max_episode_steps: int | None = None,
     trust: bool = False,
     viewer: bool = False,
+    joint_limit_mode: str = "terminate",
 ) -> EvaluationResult:
     """Evaluate a run folder on the paper's task (2048-step limit), optionally on another backend.
 
     ``trust`` loads the model even from a folder another user owns or may write to;
-    ``viewer`` shows the episodes in a live window (``render_mode="human"``, real time).
+    ``viewer`` shows the episodes in a live window (``render_mode="human"``, real time);
+    ``joint_limit_mode="clip"`` clips targets into the limits instead of ending the
+    episode at a violation (the paper's rule, the default).
     """
+    if joint_limit_mode not in JOINT_LIMIT_MODES:
+        raise ConfigError(f"--joint-limit-mode must be one of {', '.join(JOINT_LIMIT_MODES)}, got {joint_limit_mode!r}")
     config = runs.read_config(run_dir)
     if max_episode_steps is not None:
         if max_episode_steps < 1:
@@ -226,10 +235,12 @@ def evaluate_run(
         config = dataclasses.replace(config, eval_max_episode_steps=max_episode_steps)
     agent = load_agent(run_dir, config, backend, trust=trust)
     kwargs = env_kwargs(config, backend=backend, evaluation=True)
+    kwargs["joint_limit_mode"] = joint_limit_mode
     if viewer:
         kwargs["render_mode"] = "human"
     evaluation = run_episodes(lambda: ArmEnv(**kwargs), agent, episodes, seed)
     evaluation.source = agent.describe() if isinstance(agent, (SB3Agent, IKAgent)) else ""
+    evaluation.joint_limit_mode = joint_limit_mode
     return evaluation
 
 
@@ -261,6 +272,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         ("controller", str(summary.get("controller") or "")),
         ("backend", str(summary["backend"])),
         ("episodes", str(summary["episodes"])),
+        ("joint limits", "end the episode" if summary.get("joint_limit_mode", "terminate") == "terminate" else "clip"),
         ("success", f"{100 * sr:.0f} %"),
         ("ended by", ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in ended.items()) or "n/a"),
         ("steps to goal", spread(summary["steps_to_goal_mean"], summary["steps_to_goal_std"], 1)),

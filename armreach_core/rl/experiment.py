@@ -22,9 +22,10 @@ from armreach_core.defaults import DEFAULT_BACKEND
 from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
 from armreach_core.rl.checkpoints import read_progress
-from armreach_core.rl.config import RunConfig, config_mismatch, default_algo, extend, resolve_config
+from armreach_core.rl.config import RunConfig, config_mismatch, extend, resolve_config
 from armreach_core.rl.evaluate import EvaluationResult, evaluate_run, save_evaluation
 from armreach_core.rl.metrics import MeanStd, convergence_episode, moving_average
+from armreach_core.rl.stats import Interval, iqm_interval
 from armreach_core.rl.train import train
 
 #: The paper's numbers (Tables 2-4): PPO and DDPG, 614,400 steps, 100 evaluation episodes.
@@ -73,18 +74,45 @@ class ContenderResult:
     def stat(self, key: str, scale: float = 1.0) -> MeanStd:
         return MeanStd.of([s[key] * scale for s in self.summaries])
 
+    def success_iqm(self) -> Interval:
+        """Success rate over seeds: interquartile mean with its 95 % bootstrap interval."""
+        return iqm_interval([s["success_rate"] for s in self.summaries])
+
+    def ended_by(self) -> dict[str, int]:
+        """How the evaluation episodes of every seed ended, summed."""
+        totals: dict[str, int] = {}
+        for summary in self.summaries:
+            for ending, count in (summary.get("ended_by") or {}).items():
+                totals[ending] = totals.get(ending, 0) + int(count)
+        return totals
+
+
+#: The `fast` preset's agents an experiment adds with ``--fast``: its on-policy and off-policy best.
+FAST_ALGOS = ("ppo", "sac")
+
 
 def paper_contenders(steps: int | dict[str, int] | None, fast: bool) -> list[Contender]:
-    """PPO and DDPG with the paper preset (``steps``: one total, or per algorithm), plus the fast agent."""
-    per_algo = steps if isinstance(steps, dict) else {"ppo": steps, "ddpg": steps}
+    """PPO and DDPG with the paper preset, plus the `fast` preset's agents (:data:`FAST_ALGOS`).
+
+    ``steps``: one total for the paper's agents, or totals by key: ``ppo`` and ``ddpg`` for
+    the paper's agents, ``fast-<algo>`` for a fast one (default: its preset's).
+    """
+    per_key = steps if isinstance(steps, dict) else {"ppo": steps, "ddpg": steps}
     contenders = [
-        Contender("PPO", "ppo", "paper", steps=per_algo.get("ppo")),
-        Contender("DDPG", "ddpg", "paper", steps=per_algo.get("ddpg")),
+        Contender("PPO", "ppo", "paper", steps=per_key.get("ppo")),
+        Contender("DDPG", "ddpg", "paper", steps=per_key.get("ddpg")),
     ]
     if fast:
-        algo = default_algo("fast")
-        contenders.append(Contender(f"{algo.upper()} (fast preset)", algo, "fast"))
+        for algo in FAST_ALGOS:
+            contenders.append(
+                Contender(f"{algo.upper()} (fast preset)", algo, "fast", steps=per_key.get(f"fast-{algo}"))
+            )
     return contenders
+
+
+def contender_keys() -> tuple[str, ...]:
+    """The keys ``--steps KEY=N`` accepts."""
+    return ("ppo", "ddpg", *(f"fast-{algo}" for algo in FAST_ALGOS))
 
 
 def episode_rewards(run_dir: Path) -> npt.NDArray[np.float64]:
@@ -100,6 +128,24 @@ def episode_rewards(run_dir: Path) -> npt.NDArray[np.float64]:
         rows += [((j + 0.5) / len(records), float(record["r"])) for j, record in enumerate(records)]
     rows.sort(key=lambda row: row[0])
     return np.asarray([r for _, r in rows], dtype=np.float64)
+
+
+def training_progress(run_dir: Path) -> npt.NDArray[np.float64]:
+    """Finished training episodes in time order, as rows (env steps so far, seconds, success 0/1).
+
+    From the monitor logs of every env: episodes are ordered by their end time, and the
+    steps count is the sum of the lengths of the episodes finished by then (all envs).
+    """
+    rows: list[tuple[float, float, float]] = []
+    for path in sorted((run_dir / "monitor").glob("*.monitor.csv")):
+        lines = [line for line in path.read_text(encoding="utf-8").splitlines() if not line.startswith("#")]
+        for record in csv.DictReader(lines):
+            rows.append((float(record["t"]), float(record["l"]), float(record.get("is_success") == "True")))
+    rows.sort()
+    if not rows:
+        return np.zeros((0, 3))
+    table = np.asarray(rows, dtype=np.float64)
+    return np.column_stack([np.cumsum(table[:, 1]), table[:, 0], table[:, 2]])
 
 
 def _plan(run_dir: Path, config: RunConfig) -> tuple[RunConfig, str]:

@@ -28,10 +28,11 @@ from typing import Any
 import yaml
 
 from armreach_core.errors import ConfigError
+from armreach_core.rl.learners import LEARNERS
 
-ALGOS = ("ppo", "ddpg", "td3", "sac", "ik")
-RL_ALGOS = ALGOS[:4]
-OFF_POLICY = ("ddpg", "td3", "sac")
+ALGOS = ("ppo", "ddpg", "td3", "sac", "tqc", "crossq", "ik")
+RL_ALGOS = ALGOS[:-1]
+OFF_POLICY = ("ddpg", "td3", "sac", "tqc", "crossq")
 
 Check = Callable[[str, Any], Any]
 
@@ -138,6 +139,8 @@ COMMON: dict[str, Check] = {
     "gamma": _num(float, 0.0, 1.0),
     "batch_size": _num(int, 1),
     "checkpoint_every": _num(int, 1),
+    # the library that trains (armreach_core.rl.learners)
+    "learner": _choice(*LEARNERS),
 }
 ALGO_SCHEMAS: dict[str, dict[str, Check]] = {
     "ppo": {
@@ -158,6 +161,7 @@ for _name in OFF_POLICY:
         "learning_starts": _num(int, 0),
         "train_freq": _num(int, 1),
         "gradient_steps": _num(int, 1),
+        "policy_delay": _num(int, 1),
         "noise": _section(NOISE_SCHEMA),
         "her": _section(HER_SCHEMA),
     }
@@ -192,6 +196,8 @@ class Preset:
     description: str
     settings: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
     source: str = ""
+    #: The algorithm ``--preset`` trains when no ``--algo`` is given (top-level ``default_algo``), if set.
+    default_algo: str | None = None
 
     def get(self, task: str, algo: str) -> dict[str, Any]:
         """The settings for (task, algo); ConfigError listing what the preset has otherwise."""
@@ -226,6 +232,9 @@ def parse_preset(text: str, name: str, source: str = "") -> Preset:
     description = data.pop("description", "")
     if not isinstance(description, str):
         raise ConfigError(f"preset {name!r}: description must be a string")
+    default_algo = data.pop("default_algo", None)
+    if default_algo is not None and default_algo not in ALGO_SCHEMAS:
+        raise ConfigError(f"preset {name!r}: default_algo must be one of {list(ALGOS)}, got {default_algo!r}")
     settings: dict[str, dict[str, dict[str, Any]]] = {}
     for task, by_algo in data.items():
         if not isinstance(task, str) or not isinstance(by_algo, dict):
@@ -235,7 +244,10 @@ def parse_preset(text: str, name: str, source: str = "") -> Preset:
             if algo not in ALGO_SCHEMAS:
                 raise ConfigError(f"preset {name!r}: {task}.{algo}: unknown algorithm; use one of {list(ALGOS)}")
             settings[task][algo] = _validate(values, ALGO_SCHEMAS[algo], f"{task}.{algo}")
-    return Preset(name=name, description=description, settings=settings, source=source)
+    for task, by_algo in settings.items():
+        if default_algo is not None and default_algo not in by_algo:
+            raise ConfigError(f"preset {name!r}: default_algo {default_algo!r} has no settings for task {task!r}")
+    return Preset(name=name, description=description, settings=settings, source=source, default_algo=default_algo)
 
 
 def load_preset(name_or_path: str | Path) -> Preset:

@@ -13,8 +13,11 @@ from armreach_core.env import ArmEnv
 from armreach_core.rl import runs
 from armreach_core.rl.agents import Agent, env_kwargs
 from armreach_core.rl.evaluate import EvaluationResult, load_agent, run_episodes
-from armreach_core.rl.experiment import PAPER, REWARD_WINDOW, ContenderResult
+from armreach_core.rl.experiment import PAPER, REWARD_WINDOW, ContenderResult, training_progress
 from armreach_core.rl.metrics import MeanStd, moving_average
+
+#: Episodes in the moving average of the training-success figure.
+PROGRESS_WINDOW = 100
 
 
 def _paper(label: str, key: str) -> str:
@@ -117,6 +120,23 @@ def write_report(
         f"– / {ik_summary['jerk_mean']:.2f} ± {ik_summary['jerk_std']:.2f} (over episodes) | "
         f"{ik_summary['final_reward_mean']:.2f} |"
     )
+    lines += [
+        "",
+        "## Over seeds",
+        "",
+        "Success rate as the interquartile mean over seeds with its 95 % percentile-bootstrap interval "
+        "(scipy; [low, high] shown from 2 seeds on), and how every evaluation episode ended.",
+        "",
+        "| agent | seeds | success, IQM [95 % CI] | episodes ended by | training wall-clock per seed |",
+        "|---|---|---|---|---|",
+    ]
+    for r in results:
+        ended = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in r.ended_by().items()) or "–"
+        minutes = MeanStd.of(r.train_seconds).mean / 60
+        lines.append(
+            f"| {r.contender.label} | {len(r.seeds)} | {r.success_iqm().format(100.0, 0, ' %')} | {ended} "
+            f"| {minutes:.1f} min |"
+        )
     lines += ["", "## Figures", ""]
     for caption, name in figures:
         lines += [f"![{caption}]({name})", "", f"*{caption}*", ""]
@@ -180,6 +200,7 @@ def write_figures(out: Path, results: list[ContenderResult], ik: EvaluationResul
     fig.savefig(out / "learning_curves.png", dpi=110)
     plt.close(fig)
     figures.append(("Learning curves: average episode reward vs training episode (Fig. 2)", "learning_curves.png"))
+    figures.append(_progress_figure(out, results, plt))
 
     fig, ax = plt.subplots(figsize=(7, 4))
     traces: list[tuple[str, npt.NDArray[np.float64], float]] = []
@@ -214,6 +235,35 @@ def write_figures(out: Path, results: list[ContenderResult], ik: EvaluationResul
         save_rollout(frames, out / "rollout.png", out / "rollout.gif")
         figures.append((f"A successful {label} rollout (Fig. 3; animation: rollout.gif)", "rollout.png"))
     return figures
+
+
+def _progress_figure(out: Path, results: list[ContenderResult], plt: Any) -> tuple[str, str]:
+    """Training success against env steps and against wall-clock, mean over seeds with a min-max band."""
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+    for r in results:
+        progress = [training_progress(d) for d in r.run_dirs]
+        progress = [p for p in progress if len(p)]
+        if not progress:
+            continue
+        for ax, column, scale in ((axes[0], 0, 1.0), (axes[1], 1, 1 / 60)):
+            end = min(p[-1, column] for p in progress)
+            grid = np.linspace(0.0, end, 200)
+            curves = np.stack(
+                [np.interp(grid, p[:, column], moving_average(p[:, 2], PROGRESS_WINDOW) * 100) for p in progress]
+            )
+            line = ax.plot(grid * scale, curves.mean(axis=0), label=r.contender.label)[0]
+            if len(curves) > 1:
+                ax.fill_between(grid * scale, curves.min(axis=0), curves.max(axis=0), color=line.get_color(), alpha=0.2)
+    axes[0].set_xlabel("env steps")
+    axes[1].set_xlabel("training wall-clock (min)")
+    axes[0].set_ylabel(f"training success, % (last {PROGRESS_WINDOW} episodes)")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    axes[0].legend()
+    fig.tight_layout()
+    fig.savefig(out / "progress.png", dpi=110)
+    plt.close(fig)
+    return ("Training success against env steps and wall-clock (mean over seeds, band: min to max)", "progress.png")
 
 
 def _best_run(results: list[ContenderResult]) -> tuple[str, Path] | None:

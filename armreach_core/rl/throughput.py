@@ -1,4 +1,4 @@
-"""Training throughput of Stable-Baselines3 on an armreach env, for ``armreach bench``."""
+"""Training throughput of a learner (SB3 or SBX) on an armreach env, for ``armreach bench``."""
 
 from __future__ import annotations
 
@@ -6,10 +6,15 @@ import time
 from typing import Any
 
 
-def bench_sb3(
-    backend: str, algo: str, steps: int, threads: int | None = None, settings: dict[str, Any] | None = None
+def bench_training(
+    backend: str,
+    algo: str,
+    steps: int,
+    learner: str = "sb3",
+    threads: int | None = None,
+    settings: dict[str, Any] | None = None,
 ) -> float:
-    """Env steps/s while training ``algo`` with the paper preset (after its warm-up).
+    """Env steps/s while ``learner`` trains ``algo`` with the paper preset (after its warm-up and compilation).
 
     ``threads``: torch CPU threads; default what ``armreach train`` uses (see
     :func:`armreach_core.rl.train.configure_threads`). ``settings``: preset values to
@@ -24,7 +29,7 @@ def bench_sb3(
     from armreach_core.rl.config import resolve_config
     from armreach_core.rl.train import configure_threads
 
-    config = resolve_config(algo=algo, preset="paper", backend=backend)
+    config = resolve_config(algo=algo, preset="paper", backend=backend, learner=learner)
     config = config.with_settings(**(settings or {}))
     if threads is not None:
         config = config.with_settings(torch_threads=threads)
@@ -41,3 +46,7 @@ def bench_sb3(
             return (int(model.num_timesteps) - warm) / (time.perf_counter() - t0)
         finally:
             env.close()
+
+
+#: The name of :func:`bench_training` before learners other than SB3 existed.
+bench_sb3 = bench_training

@@ -17,9 +17,10 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
-from armreach_core.rl.agents import algo_class, build_model, make_vec_env
+from armreach_core.rl.agents import build_model, make_vec_env
 from armreach_core.rl.checkpoints import read_progress, save_checkpoint
 from armreach_core.rl.config import RunConfig
+from armreach_core.rl.learners import algo_class, configure_xla
 from armreach_core.rl.presets import RL_ALGOS
 
 if TYPE_CHECKING:
@@ -47,7 +48,7 @@ def _load_checkpoint(config: RunConfig, run_dir: Path, env: Any, trust: bool) ->
     try:
         # force_reset: fresh episodes, since the saved observation belongs to envs that no longer exist.
         # tensorboard_log: the folder may have moved since the model was saved.
-        model = algo_class(config.algo).load(
+        model = algo_class(config.algo, config.learner).load(
             path, env=env, device=config.device, force_reset=True, tensorboard_log=str(run_dir / "tb")
         )
     except Exception as exc:  # a truncated or foreign zip: say which file and what to do
@@ -68,7 +69,7 @@ def _load_checkpoint(config: RunConfig, run_dir: Path, env: Any, trust: bool) ->
 
 
 def configure_threads(torch_threads: int, device: str) -> int:
-    """Set torch's CPU threads: ``torch_threads`` (a preset's), else (0) 1 when training on the CPU.
+    """Set torch's (and XLA's) CPU threads: ``torch_threads`` (a preset's), else (0) 1 when training on the CPU.
 
     One thread is the measured default: with two, PyTorch's OpenMP workers fight the
     physics engine for the cores; SB3 DDPG on PyBullet ran at 3.8 env steps/s with
@@ -81,6 +82,7 @@ def configure_threads(torch_threads: int, device: str) -> int:
         on_cpu = device == "cpu" or (device == "auto" and not torch.cuda.is_available())
         threads = 1 if on_cpu else torch.get_num_threads()
     torch.set_num_threads(threads)
+    configure_xla(threads)  # the same for SBX's JAX, if it has not started yet (else its first setting stays)
     return threads
 
 

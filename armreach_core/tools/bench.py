@@ -27,6 +27,10 @@ from armreach_core.loading import load_backend_class, load_backend_probes
 TARGETS = {"step_over_bare": 1.25, "reset_ms": 1.0, "create_ms": 50.0}
 
 
+#: How the table names each learner.
+LEARNER_NAMES = {"sb3": "SB3 (PyTorch)", "sbx": "SBX (JAX)"}
+
+
 @dataclass
 class BackendBench:
     backend: str
@@ -35,7 +39,8 @@ class BackendBench:
     reset_ms: float = float("nan")
     create_ms: float = float("nan")
     vector_steps_per_s: dict[int, float] = field(default_factory=dict)
-    sb3_steps_per_s: dict[str, float] = field(default_factory=dict)
+    #: Env steps/s while training, by ``"<learner> <algo>"`` (``"sbx ddpg"``).
+    training_steps_per_s: dict[str, float] = field(default_factory=dict)
 
     @property
     def step_over_bare(self) -> float:
@@ -151,14 +156,16 @@ def run_bench(
     repeats: int = 3,
     vector: bool = True,
     sb3_steps: dict[str, int] | None = None,
-    sb3: Callable[[str, str, int], float] | None = None,
+    sb3: Callable[[str, str, int, str], float] | None = None,
+    learners: Sequence[str] = ("sb3",),
     env_kwargs: Mapping[str, Any] | None = None,
     log: Callable[[str], None] = print,
 ) -> list[BackendBench]:
     """Measure every backend.
 
-    ``sb3_steps`` maps algorithm → timed training steps, measured by ``sb3(backend, algo,
-    steps)`` (:func:`armreach_core.rl.throughput.bench_sb3`); skipped when either is None.
+    ``sb3_steps`` maps algorithm → timed training steps, measured for each of ``learners``
+    by ``sb3(backend, algo, steps, learner)`` (:func:`armreach_core.rl.throughput.bench_training`);
+    skipped when either is None.
     """
     results = []
     for name in backends:
@@ -195,8 +202,10 @@ def run_bench(
             log(f"{name}: vectorized {result.vector_steps_per_s}")
         if sb3 is not None:
             for algo, n in (sb3_steps or {}).items():
-                result.sb3_steps_per_s[algo] = sb3(name, algo, n)
-                log(f"{name}: SB3 {algo} (paper preset) {result.sb3_steps_per_s[algo]:,.0f} steps/s")
+                for learner in learners:
+                    key = f"{learner} {algo}"
+                    result.training_steps_per_s[key] = sb3(name, algo, n, learner)
+                    log(f"{name}: {key} training (paper preset) {result.training_steps_per_s[key]:,.0f} steps/s")
         results.append(result)
     return results
 
@@ -219,7 +228,7 @@ def to_json(results: list[BackendBench]) -> dict[str, Any]:
                 "reset_ms": r.reset_ms,
                 "create_ms": r.create_ms,
                 "vector_steps_per_s": {str(k): v for k, v in r.vector_steps_per_s.items()},
-                "sb3_steps_per_s": r.sb3_steps_per_s,
+                "training_steps_per_s": r.training_steps_per_s,
             }
             for r in results
         ],
@@ -254,11 +263,12 @@ def to_markdown(results: list[BackendBench]) -> str:
                 [f"{r.vector_steps_per_s.get(workers, float('nan')):,.0f}" for r in results],
             )
         )
-    for algo in sorted({a for r in results for a in r.sb3_steps_per_s}):
+    for key in sorted({k for r in results for k in r.training_steps_per_s}, key=lambda k: k.split()[::-1]):
+        learner, algo = key.split()
         rows.append(
             (
-                f"SB3 {algo.upper()} training (paper preset), steps/s",
-                [f"{r.sb3_steps_per_s.get(algo, float('nan')):,.0f}" for r in results],
+                f"{LEARNER_NAMES.get(learner, learner)} {algo.upper()} training (paper preset), steps/s",
+                [f"{r.training_steps_per_s.get(key, float('nan')):,.0f}" for r in results],
             )
         )
     lines = [f"| measure | {' | '.join(names)} |", "|---|" + "---|" * len(names)]

@@ -1,0 +1,133 @@
+"""Learners: which library trains an algorithm, Stable-Baselines3 (PyTorch) or SBX (JAX).
+
+Both implement the same algorithms behind the same API (SBX is the SB3 team's JAX port,
+built on SB3's base classes), so the rest of armreach (callbacks, checkpoints, replay
+buffers, evaluation) does not care which one trained a run. The learner is a preset key
+(``learner: sbx``) and a ``--learner`` flag; a run's ``config.yaml`` records it, and a run
+without one (written before learners existed) is an SB3 run.
+
+Off-policy runs default to SBX: at the paper's DDPG settings on 2 cores it trains 2.7
+times as many env steps per second as SB3 (``armreach bench --learners``, figures in
+docs/benchmarks.md); PPO stays on SB3, whose speed is the env's there.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import os
+import sys
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+from armreach_core.errors import ConfigError
+
+if TYPE_CHECKING:
+    from stable_baselines3.common.base_class import BaseAlgorithm
+
+LEARNERS = ("sb3", "sbx")
+#: A run config without a ``learner`` setting was trained with this one.
+LEGACY_LEARNER = "sb3"
+#: The module of each (learner, algorithm): SB3's family is Stable-Baselines3 and its
+#: contrib package (TQC, CrossQ); SBX has them all.
+MODULES = {
+    "sb3": {
+        "ppo": "stable_baselines3",
+        "ddpg": "stable_baselines3",
+        "td3": "stable_baselines3",
+        "sac": "stable_baselines3",
+        "tqc": "sb3_contrib",
+        "crossq": "sb3_contrib",
+    },
+    "sbx": {algo: "sbx" for algo in ("ppo", "ddpg", "td3", "sac", "tqc", "crossq")},
+}
+#: Algorithms each learner offers (names as in presets).
+ALGORITHMS = {learner: tuple(modules) for learner, modules in MODULES.items()}
+CLASS_NAMES = {"ppo": "PPO", "ddpg": "DDPG", "td3": "TD3", "sac": "SAC", "tqc": "TQC", "crossq": "CrossQ"}
+#: Preset keys that become constructor arguments of another name.
+ARGUMENT_OF = {"noise": "action_noise", "her": "replay_buffer_class", "policy": "policy_kwargs"}
+#: Preset keys that are not constructor arguments at all.
+NOT_ARGUMENTS = ("timesteps", "n_envs", "torch_threads", "env", "checkpoint_every", "learner")
+#: Where a learner comes from, for the error that says what to install.
+INSTALL = {
+    "sb3": "pip install 'armreach[rl]' (it brings stable-baselines3 and sb3-contrib)",
+    "sbx": "pip install 'armreach[rl]' (it brings sbx-rl and jax)",
+}
+
+
+#: Whether the user set ``XLA_FLAGS`` before armreach ran (then armreach leaves it alone).
+_USER_XLA_FLAGS = "XLA_FLAGS" in os.environ
+
+
+def default_learner(algo: str) -> str:
+    """The learner a new run of ``algo`` uses when neither the preset nor the command line names one."""
+    return "sb3" if algo == "ppo" else "sbx"
+
+
+def check_learner(learner: str, algo: str) -> None:
+    if learner not in LEARNERS:
+        raise ConfigError(f"learner {learner!r} is unknown; use one of {', '.join(LEARNERS)}")
+    if algo not in ALGORITHMS[learner]:
+        raise ConfigError(f"learner {learner!r} has no {algo!r}; use one of {', '.join(ALGORITHMS[learner])}")
+
+
+def algo_class(algo: str, learner: str = LEGACY_LEARNER) -> type[BaseAlgorithm]:
+    """The class that trains ``algo`` with ``learner``; ConfigError naming the install when it is missing."""
+    check_learner(learner, algo)
+    if learner == "sbx" and "XLA_FLAGS" not in os.environ:
+        configure_xla()  # one thread unless configure_threads chose
+    try:
+        library = importlib.import_module(MODULES[learner][algo])
+    except ImportError as exc:
+        raise ConfigError(f"learner {learner!r} is not installed ({exc}); {INSTALL[learner]}") from None
+    cls: type[BaseAlgorithm] = getattr(library, CLASS_NAMES[algo])
+    return cls
+
+
+def check_settings(algo: str, learner: str, settings: Mapping[str, Any]) -> None:
+    """ConfigError for a preset key the learner's ``algo`` does not take (SB3's SAC has no ``policy_delay``...)."""
+    if learner == "sbx":
+        configure_xla(int(settings.get("torch_threads", 0)) or 1)  # XLA reads its flags once, when JAX starts
+    accepted = inspect.signature(algo_class(algo, learner).__init__).parameters
+    for key in settings:
+        if key in NOT_ARGUMENTS:
+            continue
+        if ARGUMENT_OF.get(key, key) not in accepted:
+            raise ConfigError(
+                f"{key}: {CLASS_NAMES[algo]} of learner {learner!r} has no {key!r}; remove the key"
+                + ("" if learner == "sbx" else " or use learner sbx")
+            )
+
+
+def activation(learner: str, name: str) -> Any:
+    """The activation function object of ``name`` (``relu``, ``tanh``) for ``learner``."""
+    if learner == "sbx":
+        import flax.linen as nn
+
+        return {"relu": nn.relu, "tanh": nn.tanh}[name]
+    import torch
+
+    return {"relu": torch.nn.ReLU, "tanh": torch.nn.Tanh}[name]
+
+
+def optimizer_kwargs(learner: str, algo: str) -> dict[str, Any]:
+    """Optimizer options of off-policy policies.
+
+    SB3: Adam's fused kernel, one call per parameter group instead of a dozen small tensor
+    operations per parameter (DDPG on 2 cores: 69 -> 74-79 env steps/s). Not for CrossQ,
+    whose policy sets its own Adam betas. SBX's optax optimizers are compiled by XLA already.
+    """
+    return {"optimizer_kwargs": {"fused": True}} if learner == "sb3" and algo != "crossq" else {}
+
+
+def configure_xla(threads: int = 1) -> None:
+    """Ask XLA (JAX's compiler) for ``threads`` CPU threads, unless the user set ``XLA_FLAGS``.
+
+    Takes effect only before JAX is imported (XLA reads its flags once): a run's
+    ``check_settings`` sets it from the run's thread count before anything imports SBX.
+    One thread by default, as for torch.
+    """
+    if not _USER_XLA_FLAGS and "jax" not in sys.modules:
+        os.environ["XLA_FLAGS"] = (
+            f"--xla_cpu_multi_thread_eigen={'true' if threads > 1 else 'false'} intra_op_parallelism_threads={threads}"
+        )
