@@ -15,27 +15,12 @@ from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
 from armreach_core.rl.config import resolve_config
 from armreach_core.rl.learners import algo_class
+from tests.test_training import TINY as TRAINING_TINY
 
 pytestmark = pytest.mark.training
 
-TINY = """
-description: a few hundred steps, for tests
-reach:
-  td3:
-    timesteps: 200
-    env: {max_episode_steps: 50}
-    policy: {net_arch: [16, 16]}
-    learning_starts: 50
-    batch_size: 32
-    checkpoint_every: 100
-  sac:
-    timesteps: 200
-    learner: sb3
-    env: {max_episode_steps: 50}
-    policy: {net_arch: [16, 16]}
-    learning_starts: 50
-    batch_size: 32
-"""
+#: test_training's tiny preset, with SB3 as the preset's own learner for SAC.
+TINY = TRAINING_TINY.replace("  sac:\n", "  sac:\n    learner: sb3\n")
 
 
 @pytest.fixture
