@@ -614,3 +614,22 @@ def test_evaluation_can_clip_at_joint_limits_instead_of_ending(
     assert paper["ended_by"]["joint_limit"] == 2
     assert clip["ended_by"]["joint_limit"] == 0 and clip["ended_by"]["time_limit"] == 2
     assert "│ joint limits   │ clip" in capsys.readouterr().out
+
+
+def test_evaluate_takes_the_arm_flags_and_refuses_an_arm_the_policy_cannot_drive(
+    tmp_path: Path, tiny: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from armreach_core.corpus import corpus_arm
+
+    run_dir = tmp_path / "run"
+    assert main(["train", "--algo", "ppo", "--preset", tiny, "--out", str(run_dir)]) == 0
+    flags = ["--episodes", "1", "--max-episode-steps", "20"]
+    assert main(["evaluate", str(run_dir), *flags, "--base-position", "0.3", "0", "0.1"]) == 0
+    assert (run_dir / "eval-pybullet-arm" / "summary.json").is_file()
+    assert not (run_dir / "eval-pybullet").exists()  # the run's own evaluation is never overwritten
+    xarm7 = corpus_arm("xarm7").path or pytest.skip("example-robot-data is not installed")
+    capsys.readouterr()
+    assert main(["evaluate", str(run_dir), *flags, "--urdf", str(xarm7)]) == 2
+    err = capsys.readouterr().err
+    assert "observation space" in err and "as many joints as the one it was trained on" in err
+    assert "Traceback" not in err

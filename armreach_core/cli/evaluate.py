@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
+
 
 def add_parser(sub: Any) -> None:
     parser = sub.add_parser("evaluate", help="evaluate a run: success, steps to goal, reward, jerk")
@@ -22,13 +24,16 @@ def add_parser(sub: Any) -> None:
         default="terminate",
         help="a joint-limit violation ends the episode (the paper's rule, default) or is clipped away",
     )
-    parser.add_argument("--out", type=Path, default=None, help="output folder (default: RUN/eval-<backend>[-clip])")
+    parser.add_argument(
+        "--out", type=Path, default=None, help="output folder (default: RUN/eval-<backend>[-clip][-arm])"
+    )
     parser.add_argument(
         "--trust", action="store_true", help="load a run another user owns or may write to (its files are pickles)"
     )
     parser.add_argument(
         "--viewer", action="store_true", help="watch the episodes in a live window (needs a display); saves nothing"
     )
+    add_robot_arguments(parser, of_run=True)
     parser.set_defaults(run=run)
 
 
@@ -44,13 +49,15 @@ def run(args: argparse.Namespace) -> int:
         trust=args.trust,
         viewer=args.viewer,
         joint_limit_mode=args.joint_limit_mode,
+        arm=robot_kwargs(args),
     )
     if args.viewer:
         successes = sum(1 for episode in evaluation.episodes if episode.success)
         print(f"watched {len(evaluation.episodes)} episodes: {successes} succeeded")
         return 0
     clip = "-clip" if args.joint_limit_mode == "clip" else ""
-    out = args.out or args.run_dir / f"eval-{evaluation.backend}{clip}"
+    other_arm = "-arm" if robot_kwargs(args) else ""  # never over the run's own evaluation
+    out = args.out or args.run_dir / f"eval-{evaluation.backend}{clip}{other_arm}"
     summary = save_evaluation(evaluation, out)
     log_to_tensorboard(args.run_dir, summary)
     print(format_summary(summary))

@@ -6,18 +6,25 @@ import argparse
 from typing import Any
 
 
-def add_robot_arguments(parser: argparse.ArgumentParser, *, urdf: bool = True) -> None:
-    """``--urdf``, ``--ee-link``, ``--home``, ``--base-position`` and ``--base-orientation``."""
+def add_robot_arguments(parser: argparse.ArgumentParser, *, urdf: bool = True, of_run: bool = False) -> None:
+    """``--urdf``, ``--ee-link``, ``--home``, ``--base-position`` and ``--base-orientation``.
+
+    ``of_run``: the flags override a run's arm (``evaluate``), so each defaults to the run's.
+    """
+
+    def default(text: str) -> str:
+        return "(default: the run's)" if of_run else f"(default: {text})"
+
     if urdf:
-        parser.add_argument("--urdf", default=None, help="URDF of the arm (default: the bundled ar6)")
-    parser.add_argument("--ee-link", default=None, help="end-effector link (default: chosen from the URDF)")
+        parser.add_argument("--urdf", default=None, help=f"URDF of the arm {default('the bundled ar6')}")
+    parser.add_argument("--ee-link", default=None, help=f"end-effector link {default('chosen from the URDF')}")
     parser.add_argument(
         "--home",
         type=float,
         nargs="+",
         default=None,
         metavar="RAD",
-        help="start pose, one value per actuated joint (default: chosen from the URDF, clear of the ground)",
+        help=f"start pose, one value per actuated joint {default('chosen from the URDF, clear of the ground')}",
     )
     parser.add_argument(
         "--base-position",
@@ -25,7 +32,7 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, urdf: bool = True) -
         nargs=3,
         default=None,
         metavar=("X", "Y", "Z"),
-        help="where the arm's root link sits in the world, m (default: 0 0 0)",
+        help=f"where the arm's root link sits in the world, m {default('0 0 0')}",
     )
     parser.add_argument(
         "--base-orientation",
@@ -33,7 +40,7 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, urdf: bool = True) -
         nargs=4,
         default=None,
         metavar=("W", "X", "Y", "Z"),
-        help="the root link's orientation as a quaternion (default: 1 0 0 0)",
+        help=f"the root link's orientation as a quaternion {default('1 0 0 0')}",
     )
 
 

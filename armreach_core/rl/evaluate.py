@@ -12,7 +12,7 @@ import csv
 import dataclasses
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -218,13 +218,17 @@ def evaluate_run(
     trust: bool = False,
     viewer: bool = False,
     joint_limit_mode: str = "terminate",
+    arm: Mapping[str, Any] | None = None,
 ) -> EvaluationResult:
     """Evaluate a run folder on the paper's task (2048-step limit), optionally on another backend.
 
     ``trust`` loads the model even from a folder another user owns or may write to;
     ``viewer`` shows the episodes in a live window (``render_mode="human"``, real time);
     ``joint_limit_mode="clip"`` clips targets into the limits instead of ending the
-    episode at a violation (the paper's rule, the default).
+    episode at a violation (the paper's rule, the default). ``arm`` overrides the run's
+    arm (``urdf``, ``ee_link``, ``home``, ``base_position``, ``base_orientation``): the same
+    policy on another start pose, base placement or arm, as long as its observation and
+    action spaces stay the policy's.
     """
     if joint_limit_mode not in JOINT_LIMIT_MODES:
         raise ConfigError(f"--joint-limit-mode must be one of {', '.join(JOINT_LIMIT_MODES)}, got {joint_limit_mode!r}")
@@ -235,13 +239,31 @@ def evaluate_run(
         config = dataclasses.replace(config, eval_max_episode_steps=max_episode_steps)
     agent = load_agent(run_dir, config, backend, trust=trust)
     kwargs = env_kwargs(config, backend=backend, evaluation=True)
+    kwargs.update({key: value for key, value in (arm or {}).items() if value is not None})
     kwargs["joint_limit_mode"] = joint_limit_mode
+    if arm and isinstance(agent, SB3Agent):
+        _check_spaces(agent, kwargs)
     if viewer:
         kwargs["render_mode"] = "human"
     evaluation = run_episodes(lambda: ArmEnv(**kwargs), agent, episodes, seed)
     evaluation.source = agent.describe() if isinstance(agent, (SB3Agent, IKAgent)) else ""
     evaluation.joint_limit_mode = joint_limit_mode
     return evaluation
+
+
+def _check_spaces(agent: SB3Agent, kwargs: dict[str, Any]) -> None:
+    """ConfigError when the env the arm flags build does not fit the policy's spaces."""
+    env = ArmEnv(**kwargs)
+    try:
+        for what in ("observation_space", "action_space"):
+            want, have = getattr(agent.model, what), getattr(env, what)
+            if getattr(want, "shape", None) != getattr(have, "shape", None):
+                raise ConfigError(
+                    f"the arm flags give an env whose {what.replace('_', ' ')} is {have}, but the run's policy "
+                    f"expects {want}: evaluate a policy on an arm with as many joints as the one it was trained on"
+                )
+    finally:
+        env.close()
 
 
 def save_evaluation(evaluation: EvaluationResult, out: Path) -> dict[str, Any]:
