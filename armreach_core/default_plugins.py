@@ -43,7 +43,7 @@ def armreach_register_robots(register: Register) -> None:
             urdf=asset_path("ar6", "ar6.urdf"),
             ee_link="tool0",
             home=AR6_HOME,
-            task_defaults={DEFAULT_TASK: {"target_center": (0.45, 0.0, 0.45)}},
+            task_defaults={DEFAULT_TASK: {"target_center": (0.45, 0.0, 0.45), "target_radius": 0.5}},
             description="UR5-class 6-DOF arm with primitive geometry (bundled)",
         )
     )

@@ -65,6 +65,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             Gymnasium's ``TimeLimit`` truncates instead (``gym.make(id, max_episode_steps=N)``).
         joint_limit_mode: ``"clip"`` (default) clips targets into the limits;
             ``"terminate"`` ends the episode when a target leaves them (the paper's rule).
+        joint_limit_penalty: subtracted from the reward on each step whose target left the
+            joint limits, default 0 (the paper's reward). Training shaping: a policy trained
+            with clipping and a penalty also keeps within the limits under the paper's rule.
         self_collision, inertia_from_file: see :class:`~armreach_core.backend.PhysicsConfig`.
         camera: a :class:`~armreach_core.backend.Camera` for rendering.
         tool_joints: joints off the arm's chain to actuate too (a gripper's fingers);
@@ -95,6 +98,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         substeps: int = 10,
         max_episode_steps: int | None = None,
         joint_limit_mode: str = "clip",
+        joint_limit_penalty: float = 0.0,
         self_collision: bool = False,
         inertia_from_file: bool = True,
         camera: Camera | None = None,
@@ -111,6 +115,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             require_display()
         if joint_limit_mode not in JOINT_LIMIT_MODES:
             raise ConfigError(f"joint_limit_mode={joint_limit_mode!r}; use one of {JOINT_LIMIT_MODES}")
+        if not (np.isfinite(joint_limit_penalty) and joint_limit_penalty >= 0):
+            raise ConfigError(f"joint_limit_penalty={joint_limit_penalty!r} must be a finite number >= 0")
         if not (np.isfinite(max_joint_step) and 0 < max_joint_step <= 1.0):
             raise ConfigError(f"max_joint_step={max_joint_step!r} rad must be in (0, 1]")
         if max_episode_steps is None:
@@ -152,6 +158,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self.max_joint_step = float(max_joint_step)
         self.max_episode_steps = max_episode_steps
         self.joint_limit_mode = joint_limit_mode
+        self.joint_limit_penalty = float(joint_limit_penalty)
         self.physics = PhysicsConfig(
             timestep=timestep, substeps=substeps, self_collision=self_collision, inertia_from_file=inertia_from_file
         )
@@ -270,7 +277,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             info["physics_unstable"] = True
         if self.render_mode == "human":
             self._show()
-        return self.task.observation(state), score.reward, terminated, truncated, info
+        reward = score.reward - self.joint_limit_penalty if violated else score.reward
+        return self.task.observation(state), reward, terminated, truncated, info
 
     def _checked_state(self, backend: Backend, previous: ArmState | None) -> tuple[ArmState, bool]:
         """The backend's state, and whether the physics blew up (then a finite stand-in state).

@@ -1,8 +1,10 @@
 """Where an arm starts: a home pose chosen from the URDF model alone, and checks of a given one.
 
 The default home is the first configuration, in a deterministic order, that keeps every
-link's collision geometry above the ground, has no two non-neighbouring links overlapping
-and leaves the end effector away from singularities. The URDF's zero pose (moved inside
+link's collision geometry above the ground, has no two non-neighbouring links overlapping,
+leaves the end effector away from singularities and is holdable against gravity with the
+URDF's effort limits (:func:`armreach_core.statics.holdable`; skipped for an arm that holds
+none of the candidates). The URDF's zero pose (moved inside
 the limits) comes first, so it is kept whenever it qualifies; then poses at growing
 distances from it. Nothing here is tuned to an arm: geometry, limits and kinematics come
 from the URDF, and the thresholds are relative to the arm's own size and Jacobian.
@@ -23,6 +25,7 @@ import numpy.typing as npt
 from armreach_core.anatomy import Tree
 from armreach_core.errors import ConfigError, URDFError
 from armreach_core.placement import rotation
+from armreach_core.statics import holdable
 
 if TYPE_CHECKING:
     from armreach_core.robot import RobotModel
@@ -313,6 +316,11 @@ def default_home(robot: RobotModel) -> FloatArray:
     lowest = _lowest(geometry, link_transforms(robot, batch))
     dexterity = _dexterity(robot, batch)
     fine = (lowest >= GROUND_CLEARANCE) & (dexterity >= MIN_DEXTERITY * typical)
+    held = holdable(robot, batch)
+    weak = "" if held.all() else " among the poses its motors hold against gravity"
+    if held.any():  # else an arm too weak for its own weight: ignore gravity rather than fail
+        fine &= held
+        lowest = np.where(held, lowest, -np.inf)
     # Candidates come in rings: the zero pose, then DIRECTIONS per radius. The first ring with
     # a qualifying pose wins; within it the most dexterous pose without self-collision.
     rings = [range(0, 1)] + [range(1 + i * DIRECTIONS, 1 + (i + 1) * DIRECTIONS) for i in range(len(RADII))]
@@ -330,7 +338,7 @@ def default_home(robot: RobotModel) -> FloatArray:
     if lowest[best] < GROUND_CLEARANCE:
         lift = round(GROUND_CLEARANCE - float(lowest[best]) + 0.05, 2)
         raise BelowGroundError(
-            f"no home keeps every link of {robot.name!r} above the ground (the best pose leaves a link "
+            f"no home{weak} keeps every link of {robot.name!r} above the ground (the best pose leaves a link "
             f"{-lowest[best]:.3f} m below it); raise the base: base_position=(0, 0, {lift:.2f}) "
             f"(--base-position 0 0 {lift:.2f}), or pass a home: home=[...] (--home ...)",
             lift,

@@ -45,6 +45,11 @@ JOINTS, EE, TARGET, VELOCITIES, DELTA = (
 )
 
 
+#: The default target ball's radius as a fraction of the arm's reach (its centre is at half the reach,
+#: forward and up): the bundled arm registers the paper's 0.5 m, 0.48 of its reach.
+TARGET_RADIUS_FRACTION = 0.5
+
+
 class ReachTask(Task):
     """Reach a random 3D point. Options are keyword arguments of the env.
 
@@ -53,9 +58,11 @@ class ReachTask(Task):
         success_bonus: reward added on success, default 10.
         distance_exponent: ``p`` in the distance term ``-d^p``, default 3 (the paper's);
             1 gives a steeper signal near the target for training.
-        target_radius: radius of the target ball (m), default 0.5.
+        target_radius: radius of the target ball (m); default from the robot's registration
+            (the bundled arm: 0.5, the paper's), else ``TARGET_RADIUS_FRACTION`` (0.5) of the arm's
+            reach ``R``, so that a small arm's task is the same task as a large arm's, scaled.
         target_center: centre of the ball (m, world frame); default from the robot's
-            registration, else ``(0.5 R, 0, 0.5 R)`` from the base, with ``R`` the arm's reach (or, for an
+            registration, else ``(0.5 R, 0, 0.5 R)`` from the base (or, for an
             arm that reaches no point of that ball, the reachable point nearest to it).
         min_target_height: lowest target height (m), default 0.05.
         goal_conditioned: return a Dict observation (observation / achieved_goal /
@@ -71,7 +78,7 @@ class ReachTask(Task):
         success_threshold: float = 0.05,
         success_bonus: float = 10.0,
         distance_exponent: float = 3.0,
-        target_radius: float = 0.5,
+        target_radius: float | None = None,
         target_center: npt.ArrayLike | None = None,
         min_target_height: float = 0.05,
         goal_conditioned: bool = False,
@@ -87,8 +94,10 @@ class ReachTask(Task):
         self.success_threshold = float(success_threshold)
         self.success_bonus = float(success_bonus)
         self.goal_conditioned = bool(goal_conditioned)
+        reach = reachability_map(robot).reach
+        if target_radius is None:
+            target_radius = TARGET_RADIUS_FRACTION * reach
         if target_center is None:
-            reach = reachability_map(robot).reach
             front = np.asarray(robot.base_position) + (0.5 * reach, 0.0, 0.5 * reach)
             self.sampler = TargetSampler(robot, front, target_radius, min_target_height)
             if not self.sampler.has_targets():  # an odd arm: centre the ball on a point it reaches

@@ -54,8 +54,8 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     The robot's home configuration with zero velocity (ar6: (0, −π/2, π/2, −π/2, −π/2, 0) rad;
     another URDF: chosen from the URDF, clear of the ground, see ``armreach_core.home``; joints
     off the arm's chain are reset to their hold positions). The target is
-    uniform in a ball of radius ``target_radius`` (0.5 m) centred at ``target_center``
-    (ar6: (0.45, 0, 0.45) m), keeping only points at least ``min_target_height`` (0.05 m) above
+    uniform in a ball of radius ``target_radius`` centred at ``target_center`` (ar6: 0.5 m around
+    (0.45, 0, 0.45) m; another arm: half its reach ``R`` around ``(R/2, 0, R/2)`` from its base), keeping only points at least ``min_target_height`` (0.05 m) above
     the ground and inside the arm's reachable set computed from the URDF. All
     randomness comes from the env's generator (``reset(seed=...)``).
 
@@ -91,7 +91,8 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
       0.05 rad (MuJoCo's soft limits overshoot slightly); positions in the world frame
       (the same as the base frame unless ``base_position``/``base_orientation`` are given);
       for a ``urdf`` without a given ``home``, the start pose chosen clear of the ground;
-      joints off the chain held; truncation owned by Gymnasium's ``TimeLimit``.
+      joints off the chain held; truncation owned by Gymnasium's ``TimeLimit``; for a
+      ``urdf``, the target ball's radius half the arm's reach (it was 0.5 m for every arm).
     """
 
 

@@ -477,8 +477,13 @@ class RobotModel:
             raise ValueError(f"joint vector has shape {arr.shape}, expected (..., {self.dof})")
         return arr
 
-    def _frames(self, q: FloatArray) -> tuple[FloatArray, list[tuple[FloatArray, FloatArray, str]]]:
-        """World transform of the end-effector link and, per actuated joint, (origin, axis, kind)."""
+    def _frames(
+        self, q: FloatArray, children: list[FloatArray] | None = None
+    ) -> tuple[FloatArray, list[tuple[FloatArray, FloatArray, str]]]:
+        """World transform of the end-effector link and, per actuated joint, (origin, axis, kind).
+
+        ``children``, when given, receives each actuated chain joint's child-link transform.
+        """
         batch = q.shape[:-1]
         transform = np.broadcast_to(self.base_transform, (*batch, 4, 4)).copy()
         joint_frames: list[tuple[FloatArray, FloatArray, str]] = []
@@ -495,7 +500,25 @@ class RobotModel:
             else:
                 motion = rotation(element.axis, angle)
             transform = transform @ motion
+            if children is not None:
+                children.append(transform)
         return transform, joint_frames
+
+    def chain_frames(self, q: npt.ArrayLike) -> tuple[list[tuple[FloatArray, FloatArray, str]], list[FloatArray]]:
+        """Per actuated chain joint: (origin, axis, kind) in the world, and its child link's 4x4 world transform."""
+        children: list[FloatArray] = []
+        _, frames = self._frames(self._check_q(q), children)
+        return frames, children
+
+    def chain_index_of(self, link: str) -> int | None:
+        """Index of the actuated chain joint that ``link`` moves with (the nearest above it), or ``None``."""
+        chain = {name: i for i, name in enumerate(self.joint_names[: self.arm_dof])}
+        while link in self._child_to_joint:
+            joint = self._child_to_joint[link]
+            if joint.name in chain:
+                return chain[joint.name]
+            link = joint.parent
+        return None
 
     def forward_kinematics(self, q: npt.ArrayLike) -> FloatArray:
         """End-effector position (m, world frame) for joint angles ``q`` of shape (dof,) or (batch, dof).

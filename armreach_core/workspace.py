@@ -1,7 +1,8 @@
 """Where the arm can reach: a voxel map built from the URDF, used to sample targets.
 
 The map is the set of voxels that the end effector visits over many joint
-configurations drawn uniformly inside the limits, eroded by one voxel so that every
+configurations drawn uniformly inside the limits and holdable against gravity with the
+URDF's effort limits (:mod:`armreach_core.statics`), eroded by one voxel so that every
 kept voxel lies inside the reachable set, not on its rim. It depends on the URDF alone
 and a fixed seed, so it is identical on every backend and every run. Voxels are 4 cm,
 coarser for arms over ~6 m so that the map stays small in memory.
@@ -10,12 +11,16 @@ coarser for arms over ~6 m so that the map stays small in memory.
 from __future__ import annotations
 
 import functools
+import logging
 
 import numpy as np
 import numpy.typing as npt
 
 from armreach_core.errors import ConfigError
 from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.statics import holdable
+
+log = logging.getLogger("armreach.workspace")
 
 VOXEL = 0.04  # m
 #: Most voxels along one axis: an arm larger than ~6 m gets coarser voxels rather than a
@@ -23,6 +28,8 @@ VOXEL = 0.04  # m
 MAX_VOXELS_PER_AXIS = 160
 SAMPLES = 120_000
 _MAP_SEED = 20240607
+#: Below this share of holdable poses the map keeps every pose (with a warning).
+MIN_HOLDABLE = 0.05
 
 
 class ReachabilityMap:
@@ -30,9 +37,18 @@ class ReachabilityMap:
 
     def __init__(self, robot: RobotModel, voxel: float = VOXEL, samples: int = SAMPLES) -> None:
         rng = np.random.default_rng(_MAP_SEED)
-        points = np.concatenate(
-            [robot.forward_kinematics(robot.sample_configurations(rng, 20_000)) for _ in range(samples // 20_000)]
-        )
+        configurations = [robot.sample_configurations(rng, 20_000) for _ in range(samples // 20_000)]
+        held = [q[holdable(robot, q)] for q in configurations]
+        if sum(len(q) for q in held) >= MIN_HOLDABLE * samples:
+            configurations = held
+        else:  # an arm too weak for its own weight almost everywhere: keep every pose, and say so
+            log.warning(
+                "%s holds under %.0f%% of its poses against gravity with its URDF effort limits; "
+                "targets are drawn from every pose",
+                robot.name,
+                100 * MIN_HOLDABLE,
+            )
+        points = np.concatenate([robot.forward_kinematics(q) for q in configurations])
         extent = float(np.max(points.max(axis=0) - points.min(axis=0)))
         voxel = max(voxel, extent / (MAX_VOXELS_PER_AXIS - 3))
         self.voxel = voxel

@@ -153,9 +153,31 @@ def test_joint_limit_rule(backend, mode):
     env.close()
 
 
+def test_joint_limit_penalty_costs_exactly_the_violating_steps(backend):
+    """The training penalty is subtracted on a step whose target leaves the limits, and only then."""
+    env = ArmReach6DOFEnv(backend=backend)
+    upper = env.unwrapped.robot.upper[0]
+    env.close()
+    home = (upper - 1e-4, -1.5707963, 1.5707963, -1.5707963, -1.5707963, 0.0)
+    rewards = {}
+    for penalty in (0.0, 0.75):
+        env = ArmReach6DOFEnv(backend=backend, home=home, joint_limit_penalty=penalty)
+        env.reset(seed=0)
+        away = env.step(np.array([-1, 0, 0, 0, 0, 0], dtype=np.float32))  # back inside the limits
+        push = env.step(np.array([1, 1, 0, 0, 0, 0], dtype=np.float32))
+        push = env.step(np.array([1, 1, 0, 0, 0, 0], dtype=np.float32))
+        rewards[penalty] = (away[1], away[4]["joint_limit_violation"], push[1], push[4]["joint_limit_violation"])
+        env.close()
+    assert rewards[0.0][1] is False and rewards[0.0][3] is True
+    assert rewards[0.75][0] == rewards[0.0][0]  # no violation: the paper's reward
+    assert rewards[0.75][2] == pytest.approx(rewards[0.0][2] - 0.75, abs=1e-12)
+
+
 def test_paper_reward_default_and_options_are_checked(backend):
     with pytest.raises(ConfigError, match="joint_limit_mode"):
         ArmReach6DOFEnv(backend=backend, joint_limit_mode="bounce")
+    with pytest.raises(ConfigError, match="joint_limit_penalty"):
+        ArmReach6DOFEnv(backend=backend, joint_limit_penalty=-1.0)
     with pytest.raises(ConfigError, match="bad option for task"):
         ArmReach6DOFEnv(backend=backend, no_such_option=1)
     with pytest.raises(ConfigError, match="render_mode"):
@@ -174,6 +196,27 @@ def test_targets_are_in_the_ball_and_reachable(env):
         assert target[2] >= 0.05
         best = min(ik.solve(robot, target, q0=q0)[1] for q0 in (robot.home, np.zeros(6), -robot.home))
         assert best < 0.01, f"seed {seed}: target {target} not reachable (IK left {best:.3f} m)"
+
+
+def test_target_region_scales_with_the_arm():
+    """The bundled arm keeps the paper's 0.5 m ball; another arm's ball is half its reach, at half its reach."""
+    from armreach_core.bundled import asset_path
+    from armreach_core.corpus import corpus_arm
+    from armreach_core.reach import TARGET_RADIUS_FRACTION
+    from armreach_core.workspace import reachability_map
+
+    bundled = ArmReach6DOFEnv()
+    assert bundled.task.sampler.radius == 0.5
+    np.testing.assert_allclose(bundled.task.sampler.center, (0.45, 0.0, 0.45))
+    bundled.close()
+    urdfs = [asset_path("ar6", "ar6.urdf"), corpus_arm("ur3").path, corpus_arm("so101").path]
+    for urdf in [u for u in urdfs if u is not None]:
+        env = ArmReach6DOFEnv(urdf=urdf)
+        reach = reachability_map(env.robot).reach
+        assert env.task.sampler.radius == pytest.approx(TARGET_RADIUS_FRACTION * reach)
+        base = np.asarray(env.robot.base_position)
+        np.testing.assert_allclose(env.task.sampler.center, base + (0.5 * reach, 0.0, 0.5 * reach))
+        env.close()
 
 
 def test_same_seed_and_actions_give_identical_trajectories(backend):

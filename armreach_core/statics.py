@@ -1,0 +1,83 @@
+"""Statics from the URDF alone: the torque each arm joint needs to hold a pose against gravity.
+
+Each link's mass (its ``<inertial>``) is lumped onto the actuated chain joint it moves with,
+at its centre of mass; a joint's gravity torque is the moment of everything it carries about
+its axis. A pose is *holdable* when every joint needs at most :data:`HOLD_MARGIN` of its URDF
+effort limit, leaving the rest to move. Used to keep targets to poses the arm can hold
+(:mod:`armreach_core.workspace`): an arm whose motors are weak for its weight (a humanoid's
+arm) is otherwise asked to reach targets it can touch only on paper.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from armreach_core.robot import FloatArray, RobotModel
+
+#: Standard gravity in the world frame (m/s²), as both engines use it.
+GRAVITY = np.array([0.0, 0.0, -9.81])
+#: The share of a joint's effort limit that holding a pose may use.
+HOLD_MARGIN = 0.8
+
+
+@dataclass(frozen=True)
+class MassModel:
+    """The mass each actuated chain joint's child segment carries rigidly, and its centre."""
+
+    masses: FloatArray  #: (arm_dof,) kg
+    centers: FloatArray  #: (arm_dof, 3) m, in each joint's child link frame
+
+
+@functools.lru_cache(maxsize=32)
+def mass_model(robot: RobotModel) -> MassModel:
+    """The (cached) lumped masses of ``robot``'s arm (off-chain joints where the robot holds them)."""
+    from armreach_core.home import link_transforms
+
+    n = robot.arm_dof
+    reference = robot.clip(np.zeros(robot.dof))
+    links = link_transforms(robot, reference)
+    _, children = robot.chain_frames(reference)
+    masses = np.zeros(n)
+    moments = np.zeros((n, 3))
+    for link in robot.link_names:
+        inertial = robot.parsed.model.link_map[link].inertial
+        mass = 0.0 if inertial is None or inertial.mass is None else float(inertial.mass)
+        index = robot.chain_index_of(link)
+        if index is None or not (np.isfinite(mass) and mass > 0):
+            continue
+        origin = np.eye(4) if inertial.origin is None else np.asarray(inertial.origin, dtype=np.float64)
+        masses[index] += mass
+        moments[index] += mass * (np.linalg.inv(children[index]) @ links[link] @ origin)[:3, 3]
+    centers = moments / np.maximum(masses, 1e-300)[:, None]
+    return MassModel(masses, centers)
+
+
+def gravity_torques(robot: RobotModel, q: npt.ArrayLike) -> FloatArray:
+    """Torque (N·m; N for prismatic joints) each arm joint applies to hold ``q`` still, shape (..., arm_dof)."""
+    model = mass_model(robot)
+    frames, children = robot.chain_frames(q)
+    centers = [child[..., :3, :3] @ model.centers[k] + child[..., :3, 3] for k, child in enumerate(children)]
+    weights = model.masses[:, None] * GRAVITY  # (n, 3)
+    torques = []
+    for j, (origin, axis, kind) in enumerate(frames):
+        total = np.zeros(np.shape(origin)[:-1])
+        for k in range(j, len(children)):
+            lever = weights[k] if kind == "prismatic" else np.cross(centers[k] - origin, weights[k])
+            total = total + np.sum(axis * lever, axis=-1)
+        torques.append(-total)  # the joint opposes gravity's moment
+    return np.stack(torques, axis=-1)
+
+
+def effort_ratio(robot: RobotModel, q: npt.ArrayLike) -> FloatArray:
+    """Per joint, the share of its effort limit that holding ``q`` takes, shape (..., arm_dof)."""
+    effort = np.array([joint.effort for joint in robot.joints[: robot.arm_dof]])
+    return np.asarray(np.abs(gravity_torques(robot, q)) / effort, dtype=np.float64)
+
+
+def holdable(robot: RobotModel, q: npt.ArrayLike, margin: float = HOLD_MARGIN) -> npt.NDArray[np.bool_]:
+    """Whether each pose in ``q`` needs at most ``margin`` of every joint's effort against gravity."""
+    return np.asarray(np.all(effort_ratio(robot, q) <= margin, axis=-1))
