@@ -40,6 +40,9 @@ class PhysicsConfig:
         inertia_from_file: use the URDF's inertia tensors (default on) rather than ones
             the engine derives from collision shapes.
         ground: add a static ground plane at z = 0 that collides with the arm.
+        visuals: load the URDF's visual meshes (default on); an env that never renders
+            (``render_mode=None``) turns them off, and a backend may then skip them to save
+            memory. Physics is the same either way.
     """
 
     timestep: float = 1.0 / 240.0
@@ -48,6 +51,7 @@ class PhysicsConfig:
     self_collision: bool = False
     inertia_from_file: bool = True
     ground: bool = True
+    visuals: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.timestep) and 0.0 < self.timestep <= 0.1):

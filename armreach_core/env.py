@@ -160,7 +160,11 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self.joint_limit_mode = joint_limit_mode
         self.joint_limit_penalty = float(joint_limit_penalty)
         self.physics = PhysicsConfig(
-            timestep=timestep, substeps=substeps, self_collision=self_collision, inertia_from_file=inertia_from_file
+            timestep=timestep,
+            substeps=substeps,
+            self_collision=self_collision,
+            inertia_from_file=inertia_from_file,
+            visuals=render_mode is not None,
         )
         self.camera = camera or Camera()
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.physics.control_dt)}

@@ -10,7 +10,6 @@ Links that move but have no ``<inertial>`` get PyBullet's default inertial (see
 
 from __future__ import annotations
 
-import hashlib
 import os
 from pathlib import Path
 from typing import Any
@@ -19,6 +18,7 @@ import numpy as np
 from lxml import etree
 
 from armreach_core.errors import URDFError
+from armreach_core.hulls import cache_dir, file_key
 from armreach_core.robot import RobotModel
 from armreach_mujoco.engine import mujoco
 
@@ -28,15 +28,12 @@ NATIVE_MESHES = (".stl", ".obj", ".msh")
 
 def mesh_cache_dir() -> Path:
     """Where converted meshes are kept (``$XDG_CACHE_HOME/armreach/mujoco-meshes``)."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "armreach" / "mujoco-meshes"
+    return cache_dir("mujoco-meshes")
 
 
 def convert_mesh(path: Path) -> Path:
     """A copy of ``path`` MuJoCo can read (.obj), converted once with trimesh and cached."""
-    stat = path.stat()
-    digest = hashlib.sha1(f"{path}:{stat.st_mtime_ns}:{stat.st_size}".encode()).hexdigest()[:16]
-    out = mesh_cache_dir() / f"{path.stem}-{digest}.obj"
+    out = mesh_cache_dir() / f"{path.stem}-{file_key(path)}.obj"
     if out.is_file():
         return out
     import trimesh

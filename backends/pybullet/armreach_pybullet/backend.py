@@ -27,6 +27,7 @@ import numpy.typing as npt
 
 from armreach_core.backend import NO_OBJECTS, ArmState, Backend, BodyState, Camera, PhysicsConfig
 from armreach_core.errors import ArmReachError, URDFError
+from armreach_core.hulls import simulation_urdf
 from armreach_core.robot import FloatArray, RobotModel
 from armreach_pybullet.friction import JointFriction
 
@@ -141,7 +142,7 @@ class PyBulletBackend(Backend):
         with tempfile.TemporaryDirectory(prefix="armreach-") as tmp:
             path = os.path.join(tmp, "robot.urdf")
             with open(path, "wb") as handle:
-                handle.write(robot.parsed.resolved_xml)
+                handle.write(simulation_urdf(robot, visuals=physics.visuals))
             try:
                 with _engine_output_to_log():
                     body = pb.loadURDF(

@@ -1,0 +1,94 @@
+"""Collision meshes as convex hulls, visual meshes only where an env renders.
+
+A detailed mesh and its convex hull collide the same in both engines (each collides a
+mesh through its hull), so the hulls may replace the meshes: what must hold is that the
+hull is the hull (every original vertex inside, every hull vertex an original one), that
+the physics is unchanged with and without visual meshes, and that the saving is real.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lxml import etree
+
+from armreach_core.corpus import corpus_arm
+from armreach_core.env import ArmEnv
+from armreach_core.hulls import convex_hull, simulation_urdf
+from armreach_core.robot import RobotModel
+
+trimesh = pytest.importorskip("trimesh")
+
+
+def _arm(name: str) -> str:
+    arm = corpus_arm(name)
+    if arm.path is None:
+        pytest.skip(f"{name} is not installed: {arm.install}")
+    return str(arm.path)
+
+
+def test_hull_of_a_mesh_contains_it_and_is_made_of_its_vertices(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    robot = RobotModel(_arm("so101"))
+    root = etree.fromstring(robot.parsed.resolved_xml)
+    mesh_file = Path(next(m.get("filename") for c in root.iter("collision") for m in c.iter("mesh")))
+    hull_file = convex_hull(mesh_file)
+    assert hull_file != mesh_file and hull_file.parent == tmp_path / "armreach" / "hulls"
+    original, hull = trimesh.load(str(mesh_file), force="mesh"), trimesh.load(str(hull_file), force="mesh")
+    assert len(hull.vertices) < len(original.vertices)
+    assert hull.is_watertight
+    assert hull.volume == pytest.approx(hull.convex_hull.volume, rel=1e-6)  # convex, as written to the file
+    assert hull.volume == pytest.approx(original.convex_hull.volume, rel=1e-6)  # and the original's hull
+    # every hull vertex is one of the original's (up to the file's decimal precision)
+    distances, _ = original.kdtree.query(hull.vertices)
+    assert distances.max() < 1e-6
+    assert convex_hull(mesh_file) == hull_file  # cached: the same file again
+
+
+def test_unreadable_collision_mesh_is_kept_as_it_is(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    bad = tmp_path / "broken.stl"
+    bad.write_text("solid nothing\nendsolid nothing\n")
+    assert convex_hull(bad) == bad
+
+
+def test_simulation_urdf_swaps_collision_meshes_and_drops_visuals_only_when_asked():
+    robot = RobotModel(_arm("z1"))
+    original = etree.fromstring(robot.parsed.resolved_xml)
+    with_visuals = etree.fromstring(simulation_urdf(robot, visuals=True))
+    bare = etree.fromstring(simulation_urdf(robot, visuals=False))
+    count = lambda root, tag: len(list(root.iter(tag)))  # noqa: E731
+    assert count(with_visuals, "visual") == count(original, "visual") > 0
+    assert count(bare, "visual") == 0
+    assert count(bare, "collision") == count(original, "collision")
+    swapped = [m.get("filename") for c in bare.iter("collision") for m in c.iter("mesh")]
+    assert swapped and all("/armreach/hulls/" in f for f in swapped)
+    visual_meshes = {m.get("filename") for v in with_visuals.iter("visual") for m in v.iter("mesh")}
+    assert visual_meshes == {m.get("filename") for v in original.iter("visual") for m in v.iter("mesh")}
+
+
+@pytest.mark.parametrize("backend", ["pybullet"])
+def test_visual_meshes_change_no_physics_and_load_only_to_render(backend):
+    """The same seeded episode with and without visual meshes; the env that renders has them."""
+    urdf = _arm("so101")
+    runs = {}
+    for mode in (None, "rgb_array"):
+        env = ArmEnv(backend=backend, urdf=urdf, render_mode=mode)
+        obs, _ = env.reset(seed=3)
+        rng = np.random.default_rng(3)
+        trace = [obs]
+        for _ in range(40):
+            trace.append(env.step(rng.uniform(-1, 1, env.robot.dof).astype(np.float32))[0])
+        runs[mode] = np.array(trace)
+        if mode == "rgb_array":
+            image = env.render()
+            assert image is not None and image.std() > 1.0  # the arm is drawn
+        import pybullet as pb
+
+        shapes = pb.getVisualShapeData(env.backend._body, physicsClientId=env.backend.client)
+        detailed = [s for s in shapes if b"/armreach/hulls/" not in s[4] and s[4]]
+        assert (len(detailed) > 0) is (mode is not None)  # without rendering, PyBullet draws the hulls only
+        env.close()
+    np.testing.assert_array_equal(runs[None], runs["rgb_array"])
