@@ -18,6 +18,7 @@ from armreach_core.corpus import corpus_arm
 from armreach_core.env import ArmEnv
 from armreach_core.hulls import convex_hull, simulation_urdf
 from armreach_core.robot import RobotModel
+from tests.conftest import BACKENDS
 
 trimesh = pytest.importorskip("trimesh")
 
@@ -69,7 +70,13 @@ def test_simulation_urdf_swaps_collision_meshes_and_drops_visuals_only_when_aske
     assert visual_meshes == {m.get("filename") for v in original.iter("visual") for m in v.iter("mesh")}
 
 
-@pytest.mark.parametrize("backend", ["pybullet"])
+def robot_meshes(urdf: str) -> set[str]:
+    """The distinct collision mesh files of the URDF (the visuals use the same files)."""
+    root = etree.fromstring(RobotModel(urdf).parsed.resolved_xml)
+    return {m.get("filename") for c in root.iter("collision") for m in c.iter("mesh")}
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
 def test_visual_meshes_change_no_physics_and_load_only_to_render(backend):
     """The same seeded episode with and without visual meshes; the env that renders has them."""
     urdf = _arm("so101")
@@ -85,10 +92,14 @@ def test_visual_meshes_change_no_physics_and_load_only_to_render(backend):
         if mode == "rgb_array":
             image = env.render()
             assert image is not None and image.std() > 1.0  # the arm is drawn
-        import pybullet as pb
+        if backend == "pybullet":
+            import pybullet as pb
 
-        shapes = pb.getVisualShapeData(env.backend._body, physicsClientId=env.backend.client)
-        detailed = [s for s in shapes if b"/armreach/hulls/" not in s[4] and s[4]]
-        assert (len(detailed) > 0) is (mode is not None)  # without rendering, PyBullet draws the hulls only
+            shapes = pb.getVisualShapeData(env.backend._body, physicsClientId=env.backend.client)
+            detailed = [s for s in shapes if b"/armreach/hulls/" not in s[4] and s[4]]
+            assert (len(detailed) > 0) is (mode is not None)  # without rendering, PyBullet draws the hulls only
+        else:
+            meshes = env.backend.model.nmesh
+            assert meshes == (2 * len(robot_meshes(urdf)) if mode else len(robot_meshes(urdf)))
         env.close()
     np.testing.assert_array_equal(runs[None], runs["rgb_array"])

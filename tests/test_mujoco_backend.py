@@ -320,7 +320,8 @@ def test_meshes_mujoco_cannot_read_are_converted_and_cached(tmp_path, mesh_cache
     if "pybullet" in backends:
         pytest.importorskip("pybullet")
     for name in backends:
-        env = ArmReach6DOFEnv(backend=name, urdf=urdf, ee_link="tool0")
+        # rendering: the visual meshes are loaded (and converted) too
+        env = ArmReach6DOFEnv(backend=name, urdf=urdf, ee_link="tool0", render_mode="rgb_array")
         robot, backend = env.unwrapped.robot, env.unwrapped.backend
         assert robot.dof == 6
         obs, _ = env.reset(seed=3)
@@ -336,8 +337,8 @@ def test_meshes_mujoco_cannot_read_are_converted_and_cached(tmp_path, mesh_cache
         assert worst < 1e-6, f"{name} FK differs from the URDF by {worst:.2e} m"
         if name == "mujoco":
             model = backend.model
-            assert model.nmesh == 3
-            assert int(np.sum(model.geom_type == mujoco.mjtGeom.mjGEOM_MESH)) == 6  # visual and collision
+            assert model.nmesh == 6  # three visual meshes and their three convex hulls for collisions
+            assert int(np.sum(model.geom_type == mujoco.mjtGeom.mjGEOM_MESH)) == 6
         env.close()
 
     # one .obj per converted mesh (<stem>-<digest>.obj), the same box as the original; base.stl is used as it is

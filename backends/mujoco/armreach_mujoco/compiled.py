@@ -74,7 +74,7 @@ _cache_lock = threading.Lock()
 
 def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> CompiledModel:
     """Build and compile a model (uncached: use :func:`compiled_model`)."""
-    spec = spec_from_urdf(robot)
+    spec = spec_from_urdf(robot, physics.visuals)
     world.set_options(spec, physics)
     world.set_arm_contacts(spec, robot, physics)
     servo.add_servos(spec, robot)

@@ -18,7 +18,7 @@ import numpy as np
 from lxml import etree
 
 from armreach_core.errors import URDFError
-from armreach_core.hulls import cache_dir, file_key
+from armreach_core.hulls import cache_dir, file_key, simulation_urdf
 from armreach_core.robot import RobotModel
 from armreach_mujoco.engine import mujoco
 
@@ -62,9 +62,13 @@ def convert_mesh(path: Path) -> Path:
     return out
 
 
-def urdf_for_mujoco(robot: RobotModel) -> str:
-    """The robot's resolved URDF with readable mesh paths and MuJoCo's compiler block."""
-    root = etree.fromstring(robot.parsed.resolved_xml)
+def urdf_for_mujoco(robot: RobotModel, visuals: bool = True) -> str:
+    """The robot's resolved URDF with readable mesh paths and MuJoCo's compiler block.
+
+    Collision meshes are their convex hulls (what MuJoCo collides anyway) and, without
+    ``visuals``, there are no visual meshes (:func:`armreach_core.hulls.simulation_urdf`).
+    """
+    root = etree.fromstring(simulation_urdf(robot, visuals=visuals))
     for mesh in root.iter("mesh"):
         filename = Path(mesh.get("filename", ""))
         if filename.suffix.lower() not in NATIVE_MESHES:
@@ -102,7 +106,7 @@ def links_without_inertial(robot: RobotModel) -> list[str]:
     return moving
 
 
-def spec_from_urdf(robot: RobotModel) -> Any:
+def spec_from_urdf(robot: RobotModel, visuals: bool = True) -> Any:
     """An ``MjSpec`` of the robot alone, as MuJoCo imports it, with PyBullet's missing inertials.
 
     PyBullet's URDF reader gives a moving link without ``<inertial>`` (a bare ``tool0``)
@@ -111,7 +115,7 @@ def spec_from_urdf(robot: RobotModel) -> Any:
     move ~50x faster than in PyBullet. Links welded to the root keep MuJoCo's reading.
     """
     try:
-        spec = mujoco.MjSpec.from_string(urdf_for_mujoco(robot))
+        spec = mujoco.MjSpec.from_string(urdf_for_mujoco(robot, visuals))
     except ValueError as exc:  # MuJoCo's URDF importer refused the file
         raise URDFError(
             f"MuJoCo cannot read {robot.urdf_path}: {' '.join(str(exc).split())}; fix the element it names"
