@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import numpy.typing as npt
 
 from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.statics import holdable_paths
 
 
 def dls_step(robot: RobotModel, q: npt.ArrayLike, target: npt.ArrayLike, damping: float = 0.05) -> FloatArray:
@@ -51,24 +54,32 @@ def solve_with_restarts(
     restarts: int = RESTARTS,
     tolerance: float = 1e-4,
     seed: int = 0,
+    accept: Callable[[FloatArray], bool] | None = None,
 ) -> tuple[FloatArray, float]:
     """:func:`solve` from ``q0``, then from home, then from ``restarts`` random configurations.
 
-    Returns the first solution within ``tolerance`` (so the nearest start that works wins),
-    else the best one found. The random starts are seeded: the result is deterministic.
+    Returns the first solution within ``tolerance`` that ``accept`` takes (so the nearest
+    start that works wins), else the first within ``tolerance``, else the best one found.
+    The random starts are seeded: the result is deterministic.
     """
     rng = np.random.default_rng(seed)
     starts = [np.asarray(q0, dtype=np.float64), robot.home]
     best_q, best_d = robot.home, float("inf")
+    fallback: FloatArray | None = None  # within tolerance, but not accepted
     for i in range(restarts + 2):
         start = starts[i] if i < len(starts) else robot.sample_configurations(rng, 1)[0]
         if i >= len(starts):
             start[robot.arm_dof :] = robot.home[robot.arm_dof :]  # off-arm joints keep their home
         q, distance = solve(robot, target, q0=start, tolerance=tolerance)
+        if distance < tolerance:
+            if accept is None or accept(q):
+                return q, distance
+            if fallback is None:
+                fallback = q
         if distance < best_d:
             best_q, best_d = q, distance
-        if distance < tolerance:
-            break
+    if fallback is not None:
+        return fallback, float(np.linalg.norm(np.asarray(target) - robot.forward_kinematics(fallback)))
     return best_q, best_d
 
 
@@ -80,7 +91,9 @@ class IKPolicy:
 
     With ``restarts`` > 0 it first plans: when the target changes it solves the inverse
     kinematics (from the current angles, then from home and ``restarts`` seeded random
-    configurations, :func:`solve_with_restarts`) and moves all joints together in joint
+    configurations, :func:`solve_with_restarts`, preferring a solution whose straight
+    joint-space path from here the motors hold against gravity,
+    :func:`armreach_core.statics.holdable_paths`) and moves all joints together in joint
     space towards that solution, switching to damped least squares within ``near`` metres of
     the target. This reaches targets where the plain closed loop stops in a local minimum
     or at a joint limit.
@@ -110,7 +123,13 @@ class IKPolicy:
         if self.restarts > 0:
             if self._target is None or not np.array_equal(goal, self._target):
                 self._target = goal.copy()
-                self._goal, _ = solve_with_restarts(self.robot, goal, q_arr, restarts=self.restarts)
+                self._goal, _ = solve_with_restarts(
+                    self.robot,
+                    goal,
+                    q_arr,
+                    restarts=self.restarts,
+                    accept=lambda q: bool(holdable_paths(self.robot, q_arr, q)[0]),
+                )
             far = float(np.linalg.norm(goal - self.robot.forward_kinematics(q_arr))) > self.near
             if self._goal is not None and far:
                 dq = self._goal - q_arr

@@ -81,3 +81,16 @@ def effort_ratio(robot: RobotModel, q: npt.ArrayLike) -> FloatArray:
 def holdable(robot: RobotModel, q: npt.ArrayLike, margin: float = HOLD_MARGIN) -> npt.NDArray[np.bool_]:
     """Whether each pose in ``q`` needs at most ``margin`` of every joint's effort against gravity."""
     return np.asarray(np.all(effort_ratio(robot, q) <= margin, axis=-1))
+
+
+def holdable_paths(
+    robot: RobotModel, start: npt.ArrayLike, goals: npt.ArrayLike, points: int = 16, margin: float = HOLD_MARGIN
+) -> npt.NDArray[np.bool_]:
+    """Whether each straight joint-space line from ``start`` to a pose of ``goals`` (n, dof) is
+    holdable all along (``points`` poses per line, ends included): the path a joint-space
+    controller takes, which a weak arm may not follow although both ends are holdable."""
+    a = np.asarray(start, dtype=np.float64)
+    b = np.atleast_2d(np.asarray(goals, dtype=np.float64))
+    t = np.linspace(0.0, 1.0, points)[:, None, None]
+    path = a + t * (b - a)  # (points, n, dof)
+    return np.asarray(holdable(robot, path, margin).all(axis=0))

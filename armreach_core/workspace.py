@@ -2,7 +2,8 @@
 
 The map is the set of voxels that the end effector visits over many joint
 configurations drawn uniformly inside the limits and holdable against gravity with the
-URDF's effort limits (:mod:`armreach_core.statics`), eroded by one voxel so that every
+URDF's effort limits (:mod:`armreach_core.statics`; for an arm that cannot hold every
+pose, also along the straight joint-space path from home), eroded by one voxel so that every
 kept voxel lies inside the reachable set, not on its rim. It depends on the URDF alone
 and a fixed seed, so it is identical on every backend and every run. Voxels are 4 cm,
 coarser for arms over ~6 m so that the map stays small in memory.
@@ -18,7 +19,7 @@ import numpy.typing as npt
 
 from armreach_core.errors import ConfigError
 from armreach_core.robot import FloatArray, RobotModel
-from armreach_core.statics import holdable
+from armreach_core.statics import holdable, holdable_paths
 
 log = logging.getLogger("armreach.workspace")
 
@@ -30,6 +31,8 @@ SAMPLES = 120_000
 _MAP_SEED = 20240607
 #: Below this share of holdable poses the map keeps every pose (with a warning).
 MIN_HOLDABLE = 0.05
+#: Poses checked along each straight path from home (see :func:`armreach_core.statics.holdable_paths`).
+PATH_POINTS = 9
 
 
 class ReachabilityMap:
@@ -39,8 +42,13 @@ class ReachabilityMap:
         rng = np.random.default_rng(_MAP_SEED)
         configurations = [robot.sample_configurations(rng, 20_000) for _ in range(samples // 20_000)]
         held = [q[holdable(robot, q)] for q in configurations]
-        if sum(len(q) for q in held) >= MIN_HOLDABLE * samples:
-            configurations = held
+        if sum(len(q) for q in held) == samples:
+            pass  # holdable everywhere in the limits' box, so along every straight path in it too
+        elif sum(len(q) for q in held) >= MIN_HOLDABLE * samples:
+            # weak for its weight: keep the poses reached from home along a line the motors hold
+            home = robot.home
+            paths = [q[holdable_paths(robot, home, q, points=PATH_POINTS)] for q in held]
+            configurations = paths if sum(len(q) for q in paths) >= MIN_HOLDABLE * samples else held
         else:  # an arm too weak for its own weight almost everywhere: keep every pose, and say so
             log.warning(
                 "%s holds under %.0f%% of its poses against gravity with its URDF effort limits; "
