@@ -18,7 +18,7 @@ import hashlib
 import logging
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from lxml import etree
 
@@ -46,7 +46,6 @@ def convex_hull(path: Path) -> Path:
     if out.is_file():
         return out
     import trimesh
-    from trimesh.exchange.obj import export_obj
 
     try:
         hull = trimesh.load(str(path), force="mesh").convex_hull  # type: ignore[attr-defined]
@@ -56,9 +55,17 @@ def convex_hull(path: Path) -> Path:
     if len(hull.vertices) < 4 or len(hull.faces) < 4:
         log.info("collision mesh %s kept as it is: its convex hull is degenerate", path)
         return path
+    return write_obj(hull, out)
+
+
+def write_obj(mesh: Any, out: Path) -> Path:
+    """Write a trimesh mesh to ``out`` as ``.obj``, geometry only (a material file would be
+    shared by every mesh in the folder), atomically: a reader never sees half a file."""
+    from trimesh.exchange.obj import export_obj
+
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_suffix(f".{os.getpid()}.tmp.obj")
-    text: str = export_obj(hull, include_texture=False, write_texture=False)  # type: ignore[no-untyped-call]
+    text: str = export_obj(mesh, include_texture=False, write_texture=False)  # type: ignore[no-untyped-call]
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, out)
     return out

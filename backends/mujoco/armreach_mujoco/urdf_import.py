@@ -10,7 +10,6 @@ Links that move but have no ``<inertial>`` get PyBullet's default inertial (see
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +17,7 @@ import numpy as np
 from lxml import etree
 
 from armreach_core.errors import URDFError
-from armreach_core.hulls import cache_dir, file_key, simulation_urdf
+from armreach_core.hulls import cache_dir, file_key, simulation_urdf, write_obj
 from armreach_core.robot import RobotModel
 from armreach_mujoco.engine import mujoco
 
@@ -37,7 +36,6 @@ def convert_mesh(path: Path) -> Path:
     if out.is_file():
         return out
     import trimesh
-    from trimesh.exchange.obj import export_obj
 
     fix = "fix the file, or convert it to .stl or .obj and point the URDF at that"
     try:
@@ -53,13 +51,7 @@ def convert_mesh(path: Path) -> Path:
             f"mesh {str(path)!r} has {vertices} vertices and {faces} triangles once read by trimesh, "
             f"and MuJoCo needs at least 4 vertices and a triangle; {fix}"
         )
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(f".{os.getpid()}.tmp.obj")
-    # Geometry only: a material file would be shared by every converted mesh in the folder.
-    text: str = export_obj(mesh, include_texture=False, write_texture=False)  # type: ignore[no-untyped-call]
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, out)
-    return out
+    return write_obj(mesh, out)
 
 
 def urdf_for_mujoco(robot: RobotModel, visuals: bool = True) -> str:
