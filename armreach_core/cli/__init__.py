@@ -6,10 +6,23 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from armreach_core.cli import bench, evaluate, experiment, parity, plugins, robot, robustness, rollout, soak, train
+from armreach_core.cli import (
+    bench,
+    evaluate,
+    experiment,
+    parity,
+    plugins,
+    robot,
+    robustness,
+    rollout,
+    soak,
+    sweep,
+    train,
+    tune,
+)
 from armreach_core.errors import ArmReachError
 
-COMMANDS = (train, evaluate, robustness, experiment, rollout, robot, parity, bench, soak, plugins)
+COMMANDS = (train, evaluate, robustness, experiment, sweep, tune, rollout, robot, parity, bench, soak, plugins)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -18,6 +18,7 @@ import contextlib
 import os
 import signal
 import sys
+import threading
 from collections import deque
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager
@@ -60,6 +61,11 @@ class StopSignals:
 
     @contextlib.contextmanager
     def installed(self) -> Iterator[None]:
+        """The handler on SIGINT and SIGTERM for the block; off the main thread (a Ray Tune
+        trial runs in a thread) signals cannot be caught there, so nothing is installed."""
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
         previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
             for s in previous:

@@ -148,7 +148,7 @@ def training_progress(run_dir: Path) -> npt.NDArray[np.float64]:
     return np.column_stack([np.cumsum(table[:, 1]), table[:, 0], table[:, 2]])
 
 
-def _plan(run_dir: Path, config: RunConfig) -> tuple[RunConfig, str]:
+def plan_run(run_dir: Path, config: RunConfig) -> tuple[RunConfig, str]:
     """What to do with an experiment's run folder: train, resume, extend or reuse it.
 
     A folder is reused only when its settings are the ones asked for; a shorter run with
@@ -225,7 +225,7 @@ def run_experiment(
             )
             run_dir = out / f"{contender.algo}{'-her' if contender.her else ''}-{config.preset}-s{seed}"
             t0 = time.perf_counter()
-            config, action = _plan(run_dir, config)
+            config, action = plan_run(run_dir, config)
             _log(stream, f"{action} {contender.label}, seed {seed}: {run_dir}")
             if action != "reusing":
                 trained = train(config, run_dir, resume=action != "training", stream=stream, command=command)

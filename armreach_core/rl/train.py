@@ -11,6 +11,7 @@ from __future__ import annotations
 import sys
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
@@ -25,6 +26,7 @@ from armreach_core.rl.presets import RL_ALGOS
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
+    from stable_baselines3.common.callbacks import BaseCallback
 
 
 @dataclass(frozen=True)
@@ -101,14 +103,16 @@ def train(
     stream: TextIO | None = sys.stderr,
     command: list[str] | None = None,
     trust: bool = False,
+    callbacks: Sequence[BaseCallback] = (),
 ) -> TrainResult:
     """Train (or continue) the run in ``run_dir`` until ``config.timesteps``.
 
     ``stream`` shows a progress bar (None: nothing). ``trust`` resumes even from a folder
     another user owns or may write to (its checkpoint is a pickle: see
-    :func:`armreach_core.rl.runs.check_trusted`).
+    :func:`armreach_core.rl.runs.check_trusted`). ``callbacks`` are SB3 callbacks run
+    after armreach's own (a sweep's trial reports its progress with one).
     """
-    from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+    from stable_baselines3.common.callbacks import CallbackList
 
     from armreach_core.rl.callbacks import (
         AtomicCheckpointCallback,
@@ -156,14 +160,17 @@ def train(
                 checkpoints = AtomicCheckpointCallback(
                     run_dir, config.checkpoint_every, train_seconds=train_seconds, guard=signals.protect
                 )
-                callbacks: list[BaseCallback] = [StopOnSignalCallback(signals), checkpoints]
+                own: list[BaseCallback] = [StopOnSignalCallback(signals), checkpoints]
                 if stream is not None:
                     success = SuccessRateCallback()
-                    callbacks += [success, TqdmProgressBarCallback(stream, success)]
+                    own += [success, TqdmProgressBarCallback(stream, success)]
                 with warnings.catch_warnings():
                     warnings.filterwarnings("ignore", message=".*mini-batch size.*", category=UserWarning)
                     model.learn(
-                        remaining, callback=CallbackList(callbacks), reset_num_timesteps=False, tb_log_name=config.algo
+                        remaining,
+                        callback=CallbackList([*own, *callbacks]),
+                        reset_num_timesteps=False,
+                        tb_log_name=config.algo,
                     )
                 if signals.requested:
                     # Count only what the checkpoint keeps: PPO drops its unfinished rollout, and an
