@@ -21,7 +21,11 @@ import yaml
 from armreach_core.errors import ConfigError
 from armreach_core.rl.sweep import TRIAL_RECORD, load_spec, parse_spec
 
-pytestmark = pytest.mark.training
+pytestmark = [
+    pytest.mark.training,
+    # Ray starts its processes with fork(); JAX, imported by earlier tests in this process, warns about any fork
+    pytest.mark.filterwarnings("ignore:os.fork\\(\\) was called:RuntimeWarning"),
+]
 
 
 def _spec(tmp_path: Path, **data: object) -> Path:
