@@ -118,6 +118,12 @@ class IKPolicy:
         self._target: FloatArray | None = None
         self._goal: FloatArray | None = None
 
+    def _feasible(self, start: FloatArray, goal: FloatArray) -> bool:
+        """A solution every link of which is above the ground, reached along a line the motors hold."""
+        from armreach_core.home import ground_violations
+
+        return not ground_violations(self.robot, goal) and bool(holdable_paths(self.robot, start, goal)[0])
+
     def act(self, q: npt.ArrayLike, target: npt.ArrayLike) -> npt.NDArray[np.float32]:
         q_arr, goal = np.asarray(q, dtype=np.float64), np.asarray(target, dtype=np.float64)
         if self.restarts > 0:
@@ -128,7 +134,7 @@ class IKPolicy:
                     goal,
                     q_arr,
                     restarts=self.restarts,
-                    accept=lambda q: bool(holdable_paths(self.robot, q_arr, q)[0]),
+                    accept=lambda q: self._feasible(q_arr, q),
                 )
             far = float(np.linalg.norm(goal - self.robot.forward_kinematics(q_arr))) > self.near
             if self._goal is not None and far:
