@@ -42,14 +42,13 @@ class ReachabilityMap:
         rng = np.random.default_rng(_MAP_SEED)
         configurations = [robot.sample_configurations(rng, 20_000) for _ in range(samples // 20_000)]
         held = [q[holdable(robot, q)] for q in configurations]
-        if sum(len(q) for q in held) == samples:
-            pass  # holdable everywhere in the limits' box, so along every straight path in it too
-        elif sum(len(q) for q in held) >= MIN_HOLDABLE * samples:
-            # weak for its weight: keep the poses reached from home along a line the motors hold
-            home = robot.home
-            paths = [q[holdable_paths(robot, home, q, points=PATH_POINTS)] for q in held]
+        kept = sum(len(q) for q in held)
+        # Holding everywhere in the limits' box means holding along every straight path in it too:
+        # only a weak arm keeps just the poses reached from home along a line the motors hold.
+        if MIN_HOLDABLE * samples <= kept < samples:
+            paths = [q[holdable_paths(robot, robot.home, q, points=PATH_POINTS)] for q in held]
             configurations = paths if sum(len(q) for q in paths) >= MIN_HOLDABLE * samples else held
-        else:  # an arm too weak for its own weight almost everywhere: keep every pose, and say so
+        elif kept < MIN_HOLDABLE * samples:  # too weak for its own weight almost anywhere: keep every pose
             log.warning(
                 "%s holds under %.0f%% of its poses against gravity with its URDF effort limits; "
                 "targets are drawn from every pose",

@@ -310,20 +310,25 @@ def run_trial(trial: Trial, out: Path, callbacks: Sequence[Any] = ()) -> dict[st
         result = train(config, run_dir, resume=action != "training", stream=None, command=command, callbacks=callbacks)
         if result.interrupted:
             raise KeyboardInterrupt
-    summary_path = run_dir / f"eval-{trial.backend}" / "summary.json"
+    summary_path = _summary_path(run_dir, trial)
     model = run_dir / runs.MODEL
     if action == "reusing" and summary_path.is_file() and summary_path.stat().st_mtime >= model.stat().st_mtime:
         summary = json.loads(summary_path.read_text(encoding="utf-8"))
         evaluated = False
     else:
         evaluation = evaluate_run(run_dir, episodes=trial.episodes, backend=trial.backend)
-        summary = save_evaluation(evaluation, run_dir / f"eval-{trial.backend}")
+        summary = save_evaluation(evaluation, summary_path.parent)
         evaluated = True
     where = {"host": platform.node(), "pid": os.getpid(), "ray_node": _ray_node(), "action": action}
     (run_dir / TRIAL_RECORD).write_text(json.dumps(where), encoding="utf-8")
     row = trial_row(trial, run_dir, summary)
     row.update(evaluated=evaluated, train_seconds=training_seconds(run_dir, time.perf_counter() - t0))
     return row
+
+
+def _summary_path(run_dir: Path, trial: Trial) -> Path:
+    """Where the trial's evaluation summary is (the folder ``armreach evaluate`` writes for its backend)."""
+    return run_dir / f"eval-{trial.backend}" / "summary.json"
 
 
 def _ray_node() -> str | None:
@@ -461,7 +466,7 @@ def collect(out: Path, spec: SweepSpec) -> list[dict[str, Any]]:
     rows = []
     for trial in spec.trials():
         run_dir = out / "runs" / trial.id
-        summary = run_dir / f"eval-{trial.backend}" / "summary.json"
+        summary = _summary_path(run_dir, trial)
         if summary.is_file():
             rows.append(trial_row(trial, run_dir, json.loads(summary.read_text(encoding="utf-8"))))
     return rows
@@ -469,8 +474,7 @@ def collect(out: Path, spec: SweepSpec) -> list[dict[str, Any]]:
 
 def missing_trials(out: Path, spec: SweepSpec) -> list[str]:
     """Ids of the trials of ``spec`` without an evaluation in ``out``."""
-    done = {row["trial"] for row in collect(out, spec)}
-    return [t.id for t in spec.trials() if t.id not in done]
+    return [t.id for t in spec.trials() if not _summary_path(out / "runs" / t.id, t).is_file()]
 
 
 def progress_callback(report: Callable[[dict[str, Any]], None], every: int) -> Any:

@@ -118,14 +118,13 @@ class TuneSpec:
     report_every: int = 2_000
     name: str = "tune"
 
-    def trial(self, params: Mapping[str, Any], trial_id: str) -> tuple[Trial, dict[str, Any]]:
-        settings = settings_of(params)
-        policy = settings.pop("policy", None)
-        trial = Trial(
+    def trial(self, params: Mapping[str, Any], trial_id: str) -> Trial:
+        """The run of sampled ``params`` (``policy`` updates the preset's section, see :meth:`Trial.config`)."""
+        overrides = tuple(sorted(settings_of(params).items()))
+        return Trial(
             trial_id, self.algo, self.seed, self.arm, self.backend, self.preset, self.task, self.steps,
-            self.episodes, tuple(sorted(settings.items())), 1,
+            self.episodes, overrides, 1,
         )  # fmt: skip
-        return trial, ({"policy": policy} if policy else {})
 
 
 def score(success: float, steps_to_95: float, steps: int) -> float:
@@ -164,11 +163,8 @@ def run_tune(
 
     def trainable(params: dict[str, Any]) -> None:
         trial_id = tune.get_context().get_trial_id()
-        trial, extra = spec.trial(params, trial_id)
         callback = progress_callback(lambda m: tune.report({**m, "score": m["success"]}), spec.report_every)
-        if extra:
-            trial = _with_policy(trial, extra["policy"])
-        row = run_trial(trial, out / "trials", callbacks=[callback])
+        row = run_trial(spec.trial(params, trial_id), out / "trials", callbacks=[callback])
         final = score(row["success_rate"], row["steps_to_95"], spec.steps)
         tune.report({"timesteps": spec.steps, "score": final, "success": row["success_rate"]})
 
@@ -208,12 +204,6 @@ def run_tune(
     params = {k.removeprefix("config/"): v for k, v in best.config.items()}
     write_best_preset(out / "best.yaml", spec, params, float(best.metrics["score"]))
     return {"params": params, "score": float(best.metrics["score"])}
-
-
-def _with_policy(trial: Trial, policy: Mapping[str, Any]) -> Trial:
-    import dataclasses
-
-    return dataclasses.replace(trial, overrides=(*trial.overrides, ("policy", dict(policy))))
 
 
 def write_best_preset(path: Path, spec: TuneSpec, params: Mapping[str, Any], best_score: float) -> None:
