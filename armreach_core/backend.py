@@ -186,12 +186,21 @@ class Scene(ABC):
         """
         raise self._unsupported("contact queries")
 
+    def links_in_contact(self) -> tuple[str, ...]:
+        """The robot's moving links touching anything (the ground, a body, another link), by URDF name.
+
+        Links fixed to the base (:attr:`~armreach_core.robot.RobotModel.fixed_links`) are left out.
+
+        Read from the last physics step.
+        """
+        raise self._unsupported("contact queries")
+
     def set_friction(self, name: str, friction: float) -> None:
         """Sliding friction coefficient of a robot link's or a body's collision shapes.
 
-        Engines combine the two surfaces of a contact differently (PyBullet multiplies
-        the coefficients, MuJoCo takes the larger), so give both surfaces the same value
-        for the same result on every engine. Call before the first reset.
+        A contact's coefficient is the product of its two surfaces' (Bullet's rule, which
+        every backend follows); the ground's is 0.5, and so is a link's that the URDF
+        does not set. Call before the first reset.
         """
         raise self._unsupported("friction")
 

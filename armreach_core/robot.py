@@ -241,12 +241,26 @@ class RobotModel:
         self._elements = self._build_chain(chain, joints)
         self.held_joints: tuple[HeldJoint, ...] = self._held_joints(robot.joints)
         self.home: FloatArray = self._home(home, base_given=base_position is not None)
+        #: links joined to the root by fixed joints only: they never move
+        self.fixed_links: frozenset[str] = self._fixed_links(robot.joints)
 
     # -- structure ---------------------------------------------------------------------
     @property
     def dof(self) -> int:
         """Number of actuated joints."""
         return len(self.joints)
+
+    def _fixed_links(self, urdf_joints: list[Any]) -> frozenset[str]:
+        parent = {str(j.child): (str(j.parent), str(j.type)) for j in urdf_joints}
+        fixed = set()
+        for link in self.link_names:
+            current, still = link, True
+            while current in parent and still:
+                current, kind = parent[current]
+                still = kind == "fixed"
+            if still:
+                fixed.add(link)
+        return frozenset(fixed)
 
     def _choose_ee_link(self, ee_link: str | None) -> str:
         """The end effector (given or the default), setting :attr:`gripper_joints` on the way."""

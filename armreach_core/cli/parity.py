@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
-from armreach_core.tools.parity import ParityReport, markdown, run_parity
+from armreach_core.tools.parity import Gap, ParityReport, markdown, run_parity
 
 
 def add_parser(sub: Any) -> None:
@@ -50,11 +50,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"{name:>10}  FK max error {kin.max_m:.1e} m   {report.steps_per_second(name):,.0f} env steps/s")
     for name in report.backends[1:]:
         for sequence in report.trajectories:
-            gap = report.gap(sequence, name)
-            print(
-                f"{name:>10}  {sequence:<8} vs {report.reference}: joint RMS {gap.joint_rms_rad:.4f} rad, "
-                f"end effector RMS {gap.ee_rms_m * 1e3:.2f} mm (max {gap.ee_max_m * 1e3:.2f} mm)"
-            )
+            print(f"{name:>10}  {sequence:<8} vs {report.reference}: {_phases(report.gap(sequence, name))}")
     failures = report.failures()
     print("PASS: every number is within tolerance" if not failures else "FAIL: " + "; ".join(failures))
     print("saved " + ", ".join(str(path) for path in saved))
@@ -73,40 +69,57 @@ def _corpus(args: argparse.Namespace) -> int:
             continue
         report = run_parity(args.backends, str(arm.path), steps=args.steps, configs=args.configs, seed=args.seed)
         _write(report, out / arm.name)
-        gaps = {}
-        for sequence in report.trajectories:
-            for name in report.backends[1:]:
-                gap = report.gap(sequence, name)
-                gaps[f"{sequence}/{name}"] = {
-                    "ee_rms_mm": 1e3 * gap.ee_rms_m,
-                    "ee_max_mm": 1e3 * gap.ee_max_m,
-                    "joint_rms_rad": gap.joint_rms_rad,
-                }
+        payload = report.to_json(include_trajectories=False)
         rows[arm.name] = {
-            "fk_max_m": {name: kin.max_m for name, kin in report.kinematic.items()},
-            "gaps": gaps,
+            "ee_link": report.ee_link,
+            "fk_max_m": payload["kinematic"],
+            "dynamic": payload["dynamic"],
+            "first_contact": payload["first_contact"],
+            "steps_per_second": payload["steps_per_second"],
             "failures": report.failures(),
         }
-        print(f"{arm.name}: {'pass' if not report.failures() else 'fail'}")
+        print(f"{arm.name}: {'pass' if not report.failures() else 'fail: ' + '; '.join(report.failures())}")
     lines = [
         f"Command: `armreach parity --corpus --steps {args.steps} --seed {args.seed}`",
         "",
-        "| arm | sequence | end-effector RMS (max) | joint RMS | verdict |",
-        "|---|---|---|---|---|",
+        "End-effector (EE) and joint RMS gaps to the reference backend, split at the first contact of a moving "
+        "link on either backend (the step, per backend, in the contact column).",
+        "",
+        "| arm | backend | sequence | free EE RMS | free joint RMS | contact EE RMS | first contact | verdict |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for name, row in rows.items():
-        for key, gap in row["gaps"].items():
-            verdict = "pass" if not row["failures"] else "fail"
-            lines.append(
-                f"| {name} | {key} | {gap['ee_rms_mm']:.1f} mm ({gap['ee_max_mm']:.1f}) | "
-                f"{gap['joint_rms_rad']:.3f} rad | {verdict} |"
-            )
+        verdict = "pass" if not row["failures"] else "fail"
+        for backend, sequences in row["dynamic"].items():
+            for sequence, gap in sequences.items():
+                firsts = " / ".join(
+                    "-" if hit["step"] is None else str(hit["step"]) for hit in row["first_contact"][sequence].values()
+                )
+                lines.append(
+                    f"| {name} | {backend} | {sequence} | {_mm(gap['free_ee_rms_m'])} | "
+                    f"{_rad(gap['free_joint_rms_rad'])} | {_mm(gap['contact_ee_rms_m'])} | {firsts} | {verdict} |"
+                )
     out.mkdir(parents=True, exist_ok=True)
     (out / "corpus.md").write_text("\n".join(lines) + "\n")
     (out / "corpus.json").write_text(json.dumps(rows, indent=1) + "\n")
     print("\n".join(lines))
     print(f"saved {out / 'corpus.md'}, {out / 'corpus.json'} and one folder per arm")
     return 0 if all(not row["failures"] for row in rows.values()) else 1
+
+
+def _mm(value: float | None) -> str:
+    return "-" if value is None else f"{value * 1e3:.2f} mm"
+
+
+def _rad(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4f} rad"
+
+
+def _phases(gap: Gap) -> str:
+    text = f"free space EE RMS {_mm(gap.free_ee_rms_m)}, joint RMS {_rad(gap.free_joint_rms_rad)}"
+    if gap.contact_step is not None:
+        text += f"; from the first contact (step {gap.contact_step}) EE RMS {_mm(gap.contact_ee_rms_m)}"
+    return text
 
 
 def _write(report: ParityReport, out: Path) -> list[Path]:
@@ -142,7 +155,11 @@ def plot(report: ParityReport, path: Path) -> None:
             ax.tick_params(labelsize=7)
         ax = axes[dof, col]
         for name in report.backends[1:]:
-            ax.plot(time_s, report.gap(sequence, name).ee_error_m * 1e3, label=f"{name} vs {report.reference}")
+            gap = report.gap(sequence, name)
+            ax.plot(time_s, gap.ee_error_m * 1e3, label=f"{name} vs {report.reference}")
+            if gap.contact_step is not None:
+                for row in range(dof + 1):
+                    axes[row, col].axvline(time_s[gap.contact_step], color="0.5", linewidth=0.8, linestyle=":")
         ax.set_ylabel("end-effector\ngap (mm)", fontsize=7)
         ax.set_xlabel("time (s)")
         ax.tick_params(labelsize=7)

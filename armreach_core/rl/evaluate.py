@@ -27,7 +27,8 @@ from armreach_core.rl import runs
 from armreach_core.rl.agents import Agent, IKAgent, SB3Agent, env_kwargs
 from armreach_core.rl.config import RunConfig
 from armreach_core.rl.learners import algo_class
-from armreach_core.rl.metrics import MeanStd, jerk, mean_jerk, steps_to_goal
+from armreach_core.rl.metrics import MeanStd, steps_to_goal
+from armreach_core.smoothness import jerk, mean_jerk
 
 
 @dataclass(frozen=True)

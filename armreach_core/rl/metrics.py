@@ -1,6 +1,7 @@
 """The paper's metrics, as pure functions of recorded data.
 
-* **jerk**: third finite difference of joint angles at the control rate (rad/s³);
+* **jerk**: third finite difference of joint angles at the control rate (rad/s³), in
+  :mod:`armreach_core.smoothness`;
 * **steps to goal**: mean ± std of episode lengths over successful episodes;
 * **convergence episode**: the first episode from which the moving-average episode
   reward stays within ±5 % of its final value for 100 episodes.
@@ -15,30 +16,6 @@ import numpy as np
 import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
-
-
-def jerk(q: npt.ArrayLike, dt: float) -> FloatArray:
-    """Jerk magnitude per time step: ``‖Δ³q‖ / dt³`` over joints (rad/s³).
-
-    ``q`` is a ``(T, n)`` joint trajectory sampled every ``dt`` seconds; the result has
-    ``T - 3`` entries (empty for shorter trajectories). The joint vector's Euclidean norm
-    is divided by ``sqrt(n)`` so that the value is a per-joint RMS.
-    """
-    arr = np.asarray(q, dtype=np.float64)
-    if arr.ndim != 2:
-        raise ValueError(f"q must be (T, n), got shape {arr.shape}")
-    if dt <= 0:
-        raise ValueError(f"dt must be positive, got {dt}")
-    if arr.shape[0] < 4:
-        return np.zeros(0)
-    d3 = np.diff(arr, n=3, axis=0) / dt**3
-    return np.asarray(np.sqrt(np.mean(d3**2, axis=1)), dtype=np.float64)
-
-
-def mean_jerk(q: npt.ArrayLike, dt: float) -> float:
-    """Average jerk of one trajectory (rad/s³); NaN when it has fewer than 4 samples."""
-    values = jerk(q, dt)
-    return float(values.mean()) if values.size else float("nan")
 
 
 def moving_average(values: npt.ArrayLike, window: int) -> FloatArray:

@@ -10,12 +10,17 @@ Three measurements, all on the reach env built from one URDF:
   (:meth:`~armreach_core.robot.RobotModel.forward_kinematics`), over random configurations
   drawn inside the joint limits;
 * **dynamic**: every backend runs the same control sequences from the home pose through
-  ``env.step``: a seeded *random* sequence of actions ``U(-1, 1)`` (targets
-  ``θ + a · max_joint_step``) and a *scripted* reach, damped-least-squares IK
+  ``env.step`` (:data:`SEQUENCES`): a seeded *random* sequence of actions ``U(-1, 1)``
+  (targets ``θ + a · max_joint_step``); a *biased* one, ``N(0.3, 0.5)`` clipped to [-1, 1],
+  that drives the arm into the ground; a *scripted* reach, damped-least-squares IK
   (:class:`~armreach_core.ik.IKPolicy`, closed loop on each backend's own joint angles)
-  towards the target the task draws at ``reset(seed=seed)``. The joint and end-effector
-  trajectories of each backend are compared with the reference backend's (the first one
-  named);
+  towards the target the task draws at ``reset(seed=seed)``; and a scripted *press*, the
+  same IK towards a point 5 cm under the ground below the end effector's home, computed on
+  the reference backend and its actions replayed on the others (so that an IK loop that
+  amplifies small differences near a singular pose does not hide the contact). The joint
+  and end-effector trajectories of each backend are compared with the reference
+  backend's (the first one named), split at the first contact of a moving link on either
+  backend into a **free-space** phase and a **contact** phase;
 * **speed**: env steps per second of each backend during the random sequence.
 """
 
@@ -39,34 +44,55 @@ from armreach_core.ik import IKPolicy
 from armreach_core.plugins import available_backends
 from armreach_core.reach import ReachTask
 from armreach_core.robot import FloatArray
+from armreach_core.smoothness import mean_jerk
 
-SEQUENCES = ("random", "scripted")
+SEQUENCES = ("random", "biased", "scripted", "press")
+#: Sequences whose actions do not look at the state (the others close the loop through IK).
+OPEN_LOOP = ("random", "biased")
+PHASES = ("free", "contact")
+#: The biased sequence's actions: N(mean, std) per joint, clipped to [-1, 1].
+BIAS_MEAN, BIAS_STD = 0.3, 0.5
+#: Sequences computed on the reference backend and replayed on the others.
+REPLAYED = ("press",)
+#: How far under the ground the press aims (m).
+PRESS_DEPTH = 0.05
 
 
 @dataclass(frozen=True)
 class Tolerances:
     """What counts as parity (SI units).
 
-    The random sequence gets a looser end-effector bound than the scripted reach: its
-    targets are relative to each backend's own joint angles, so the small per-step
-    differences of the two position controllers add up like a random walk, whereas the
-    closed-loop reach corrects them.
+    Open-loop sequences (random, biased) get looser end-effector bounds than the
+    closed-loop ones (scripted reach, press): their targets are relative to each backend's
+    own joint angles, so per-step differences add up like a random walk, whereas IK
+    corrects them. Contact phases get looser bounds than free space: rigid (Bullet) and
+    soft (MuJoCo) contacts, and where a mesh first touches, differ.
 
     Attributes:
         fk_m: largest end-effector distance from the URDF's forward kinematics.
-        scripted_ee_rms_m: end-effector RMS gap to the reference backend, scripted reach.
-        random_ee_rms_m: end-effector RMS gap to the reference backend, random actions.
-        joint_rms_rad: joint-angle RMS gap to the reference backend, either sequence.
+        scripted_ee_rms_m, random_ee_rms_m: end-effector RMS gap to the reference backend
+            in free space, closed and open loop.
+        joint_rms_rad: joint-angle RMS gap to the reference backend in free space.
+        contact_scripted_ee_rms_m, contact_random_ee_rms_m: the end-effector bounds of the
+            contact phase, closed and open loop.
+        jerk_ratio: largest ratio of a backend's mean jerk (the paper's smoothness metric,
+            :func:`armreach_core.smoothness.mean_jerk`) to the reference's, either way round.
     """
 
     fk_m: float = 1e-6
-    scripted_ee_rms_m: float = 0.01
-    random_ee_rms_m: float = 0.025
-    joint_rms_rad: float = 0.05
+    scripted_ee_rms_m: float = 0.003
+    random_ee_rms_m: float = 0.010
+    joint_rms_rad: float = 0.02
+    contact_scripted_ee_rms_m: float = 0.010
+    contact_random_ee_rms_m: float = 0.025
+    jerk_ratio: float = 1.3
 
-    def ee_rms_m(self, sequence: str) -> float:
-        """The end-effector RMS bound of ``sequence``."""
-        return self.random_ee_rms_m if sequence == "random" else self.scripted_ee_rms_m
+    def ee_rms_m(self, sequence: str, phase: str = "free") -> float:
+        """The end-effector RMS bound of ``sequence`` in ``phase``."""
+        open_loop = sequence in OPEN_LOOP
+        if phase == "free":
+            return self.random_ee_rms_m if open_loop else self.scripted_ee_rms_m
+        return self.contact_random_ee_rms_m if open_loop else self.contact_scripted_ee_rms_m
 
 
 @dataclass(frozen=True)
@@ -86,29 +112,62 @@ class Trajectory:
     ee: FloatArray  # (steps, 3), m
     reward: FloatArray  # (steps,)
     seconds: float  # time spent inside env.step
+    actions: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))  # (steps, dof)
+    contact: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))  # (steps,)
+    first_contact_links: tuple[str, ...] = ()  # the links touching at the first contact
+
+    @property
+    def first_contact(self) -> int | None:
+        """The first step (0-based) after which a moving link touched something, or ``None``."""
+        hits = np.flatnonzero(self.contact)
+        return int(hits[0]) if len(hits) else None
+
+
+def _rms(values: FloatArray) -> float | None:
+    return float(np.sqrt(np.mean(values**2))) if values.size else None
 
 
 @dataclass(frozen=True)
 class Gap:
-    """The difference between a backend's trajectory and the reference backend's."""
+    """The difference between a backend's trajectory and the reference backend's.
+
+    Over the whole sequence, and split at ``contact_step``, the first step at which a
+    moving link touched something on either backend: the free-space phase before it, the
+    contact phase from it on (``None`` where a phase has no steps).
+    """
 
     joint_rms_rad: float
     joint_max_rad: float
     ee_rms_m: float
     ee_max_m: float
     ee_error_m: FloatArray  # (steps,), end-effector distance per step
+    contact_step: int | None = None
+    free_ee_rms_m: float | None = None
+    free_joint_rms_rad: float | None = None
+    contact_ee_rms_m: float | None = None
+    contact_joint_rms_rad: float | None = None
 
     @classmethod
     def between(cls, reference: Trajectory, other: Trajectory) -> Gap:
         dq = other.q - reference.q
         de = np.linalg.norm(other.ee - reference.ee, axis=1)
+        firsts = [step for step in (reference.first_contact, other.first_contact) if step is not None]
+        split = min(firsts) if firsts else len(de)
         return cls(
             joint_rms_rad=float(np.sqrt(np.mean(dq**2))),
             joint_max_rad=float(np.max(np.abs(dq))),
             ee_rms_m=float(np.sqrt(np.mean(de**2))),
             ee_max_m=float(np.max(de)),
             ee_error_m=de,
+            contact_step=min(firsts) if firsts else None,
+            free_ee_rms_m=_rms(de[:split]),
+            free_joint_rms_rad=_rms(dq[:split]),
+            contact_ee_rms_m=_rms(de[split:]),
+            contact_joint_rms_rad=_rms(dq[split:]),
         )
+
+    def phase_ee_rms_m(self, phase: str) -> float | None:
+        return self.free_ee_rms_m if phase == "free" else self.contact_ee_rms_m
 
 
 @dataclass
@@ -136,6 +195,16 @@ class ParityReport:
         runs = self.trajectories[sequence]
         return Gap.between(runs[self.reference], runs[backend])
 
+    def jerk(self, sequence: str, backend: str) -> float:
+        """Mean jerk (rad/s³) of ``backend``'s joint trajectory in ``sequence``."""
+        return mean_jerk(self.trajectories[sequence][backend].q, self.control_dt)
+
+    def jerk_ratio(self, sequence: str, backend: str) -> float:
+        """How many times smoother the smoother of ``backend`` and the reference is (>= 1)."""
+        ours, theirs = self.jerk(sequence, backend), self.jerk(sequence, self.reference)
+        low, high = sorted((ours, theirs))
+        return high / low if low > 0 else (1.0 if high == 0 else math.inf)
+
     def steps_per_second(self, backend: str) -> float:
         run = self.trajectories["random"][backend]
         return self.steps / run.seconds if run.seconds > 0 else math.inf
@@ -149,14 +218,17 @@ class ParityReport:
         for sequence in self.trajectories:
             for name in self.backends[1:]:
                 gap = self.gap(sequence, name)
-                bound = tol.ee_rms_m(sequence)
-                if not gap.ee_rms_m <= bound:
+                for phase in PHASES:
+                    value, bound = gap.phase_ee_rms_m(phase), tol.ee_rms_m(sequence, phase)
+                    if value is not None and not value <= bound:
+                        failed.append(
+                            f"{name} {sequence} ({phase}): end-effector RMS gap {value * 1e3:.1f} mm "
+                            f"> {bound * 1e3:g} mm"
+                        )
+                joint = gap.free_joint_rms_rad
+                if joint is not None and not joint <= tol.joint_rms_rad:
                     failed.append(
-                        f"{name} {sequence}: end-effector RMS gap {gap.ee_rms_m * 1e3:.1f} mm > {bound * 1e3:g} mm"
-                    )
-                if not gap.joint_rms_rad <= tol.joint_rms_rad:
-                    failed.append(
-                        f"{name} {sequence}: joint RMS gap {gap.joint_rms_rad:.3f} rad > {tol.joint_rms_rad:g} rad"
+                        f"{name} {sequence} (free): joint RMS gap {joint:.3f} rad > {tol.joint_rms_rad:g} rad"
                     )
         return failed
 
@@ -183,11 +255,26 @@ class ParityReport:
                         "joint_max_rad": gap.joint_max_rad,
                         "ee_rms_m": gap.ee_rms_m,
                         "ee_max_m": gap.ee_max_m,
+                        "contact_step": gap.contact_step,
+                        "free_ee_rms_m": gap.free_ee_rms_m,
+                        "free_joint_rms_rad": gap.free_joint_rms_rad,
+                        "contact_ee_rms_m": gap.contact_ee_rms_m,
+                        "contact_joint_rms_rad": gap.contact_joint_rms_rad,
                     }
                     for sequence in self.trajectories
                     for gap in [self.gap(sequence, name)]
                 }
                 for name in self.backends[1:]
+            },
+            "jerk": {
+                sequence: {name: self.jerk(sequence, name) for name in self.backends} for sequence in self.trajectories
+            },
+            "first_contact": {
+                sequence: {
+                    name: {"step": run.first_contact, "links": list(run.first_contact_links)}
+                    for name, run in runs.items()
+                }
+                for sequence, runs in self.trajectories.items()
             },
             "steps_per_second": {name: self.steps_per_second(name) for name in self.backends},
             "failures": self.failures(),
@@ -196,7 +283,12 @@ class ParityReport:
         if include_trajectories:
             payload["trajectories"] = {
                 sequence: {
-                    name: {"q": run.q.tolist(), "ee": run.ee.tolist(), "reward": run.reward.tolist()}
+                    name: {
+                        "q": run.q.tolist(),
+                        "ee": run.ee.tolist(),
+                        "reward": run.reward.tolist(),
+                        "contact": run.contact.tolist(),
+                    }
                     for name, run in runs.items()
                 }
                 for sequence, runs in self.trajectories.items()
@@ -216,11 +308,12 @@ def kinematic_parity(env: ArmEnv, configs: npt.ArrayLike) -> Kinematic:
     return Kinematic(configs=len(qs), max_m=float(errors.max(initial=0.0)), rms_m=float(np.sqrt(np.mean(errors**2))))
 
 
-def drive(env: ArmEnv, sequence: str, steps: int, seed: int) -> Trajectory:
-    """Run ``sequence`` (``"random"`` or ``"scripted"``) for ``steps`` env steps from ``env.reset(seed=seed)``.
+def drive(env: ArmEnv, sequence: str, steps: int, seed: int, replay: FloatArray | None = None) -> Trajectory:
+    """Run ``sequence`` (one of :data:`SEQUENCES`) for ``steps`` env steps from ``env.reset(seed=seed)``.
 
     Episode ends are ignored: the sequence always runs its full length, so that every
-    backend is compared over the same steps.
+    backend is compared over the same steps. ``replay``: the actions to take instead, one
+    row per step (another backend's ``Trajectory.actions``).
     """
     if sequence not in SEQUENCES:
         raise ConfigError(f"unknown sequence {sequence!r}; use one of {SEQUENCES}")
@@ -231,20 +324,45 @@ def drive(env: ArmEnv, sequence: str, steps: int, seed: int) -> Trajectory:
         raise ConfigError(f"parity runs on the reach task, not {type(task).__name__}")
     env.reset(seed=seed)
     rng = np.random.default_rng(seed)
-    policy = IKPolicy(env.robot, env.max_joint_step)
-    q_log, ee_log, rewards = np.empty((steps, env.robot.dof)), np.empty((steps, 3)), np.empty(steps)
-    state = env.backend.read_state()
+    robot, backend = env.robot, env.backend
+    policy = IKPolicy(robot, env.max_joint_step)
+    home_ee = robot.forward_kinematics(robot.home)
+    aims = {"scripted": task.target, "press": np.array([home_ee[0], home_ee[1], -PRESS_DEPTH])}
+    q_log, ee_log, rewards = np.empty((steps, robot.dof)), np.empty((steps, 3)), np.empty(steps)
+    actions = np.empty((steps, robot.dof))
+    contact = np.zeros(steps, dtype=bool)
+    first_links: tuple[str, ...] = ()
+    state = backend.read_state()
     seconds = 0.0
     for i in range(steps):
-        action: npt.NDArray[Any] = (
-            rng.uniform(-1.0, 1.0, env.robot.dof) if sequence == "random" else policy.act(state.q, task.target)
-        )
+        action: npt.NDArray[Any]
+        if replay is not None:
+            action = replay[i]
+        elif sequence == "random":
+            action = rng.uniform(-1.0, 1.0, robot.dof)
+        elif sequence == "biased":
+            action = np.clip(rng.normal(BIAS_MEAN, BIAS_STD, robot.dof), -1.0, 1.0)
+        else:
+            action = policy.act(state.q, aims[sequence])
+        actions[i] = action
         start = time.perf_counter()
         _, reward, *_ = env.step(action)
         seconds += time.perf_counter() - start
-        state = env.backend.read_state()
+        state = backend.read_state()
         q_log[i], ee_log[i], rewards[i] = state.q, state.ee_pos, float(reward)
-    return Trajectory(q=q_log, ee=ee_log, reward=rewards, seconds=seconds)
+        links = backend.links_in_contact()
+        contact[i] = bool(links)
+        if links and not first_links:
+            first_links = links
+    return Trajectory(
+        q=q_log,
+        ee=ee_log,
+        reward=rewards,
+        seconds=seconds,
+        actions=actions,
+        contact=contact,
+        first_contact_links=first_links,
+    )
 
 
 def run_parity(
@@ -304,7 +422,10 @@ def run_parity(
         for name, env in envs.items():
             report.kinematic[name] = kinematic_parity(env, qs)
         for sequence in SEQUENCES:
-            report.trajectories[sequence] = {name: drive(env, sequence, steps, seed) for name, env in envs.items()}
+            runs = report.trajectories[sequence] = {names[0]: drive(first, sequence, steps, seed)}
+            replay = runs[names[0]].actions if sequence in REPLAYED else None
+            for name in names[1:]:
+                runs[name] = drive(envs[name], sequence, steps, seed, replay)
     finally:
         for env in envs.values():
             env.close()
@@ -337,25 +458,54 @@ def markdown(report: ParityReport) -> str:
         "",
         f"## Dynamics: gap to {report.reference} over the same actions",
         "",
-        "`random`: seeded actions U(-1, 1); `scripted`: damped-least-squares IK reach to the seeded target "
-        "(closed loop on each backend's joint angles).",
+        "`random`: seeded actions U(-1, 1); `biased`: N(0.3, 0.5) clipped to [-1, 1], into the ground; "
+        "`scripted`: damped-least-squares IK reach to the seeded target (closed loop on each backend's joint "
+        f"angles); `press`: the same IK towards {PRESS_DEPTH * 100:g} cm under the ground below the end "
+        "effector's home. Each gap is split at the first contact of a moving link on either backend: "
+        "free space before it, contact from it on.",
         "",
     ]
+
+    def mm(value: float | None) -> str:
+        return "-" if value is None else f"{value * 1e3:.2f}"
+
+    def rad(value: float | None) -> str:
+        return "-" if value is None else f"{value:.4f}"
+
     rows = []
     for name in report.backends[1:]:
-        for sequence in report.trajectories:
+        for sequence, runs in report.trajectories.items():
             gap = report.gap(sequence, name)
+            firsts = ", ".join(
+                f"{backend} {'-' if run.first_contact is None else run.first_contact}" for backend, run in runs.items()
+            )
             rows.append(
                 [
                     name,
                     sequence,
-                    f"{gap.joint_rms_rad:.4f}",
-                    f"{gap.joint_max_rad:.4f}",
-                    f"{gap.ee_rms_m * 1e3:.2f}",
+                    firsts,
+                    mm(gap.free_ee_rms_m),
+                    rad(gap.free_joint_rms_rad),
+                    mm(gap.contact_ee_rms_m),
+                    rad(gap.contact_joint_rms_rad),
                     f"{gap.ee_max_m * 1e3:.2f}",
+                    f"{report.jerk(sequence, report.reference):,.0f} / {report.jerk(sequence, name):,.0f}",
                 ]
             )
-    lines += _table(["backend", "sequence", "joint RMS (rad)", "joint max (rad)", "EE RMS (mm)", "EE max (mm)"], rows)
+    lines += _table(
+        [
+            "backend",
+            "sequence",
+            "first contact (step)",
+            "free EE RMS (mm)",
+            "free joint RMS (rad)",
+            "contact EE RMS (mm)",
+            "contact joint RMS (rad)",
+            "EE max (mm)",
+            f"jerk, {report.reference} / {name} (rad/s³)",
+        ],
+        rows,
+    )
     lines += [
         "",
         "## Speed",
@@ -364,9 +514,12 @@ def markdown(report: ParityReport) -> str:
         "",
         "## Verdict",
         "",
-        f"Tolerances: FK error <= {tol.fk_m:.0e} m; end-effector RMS gap <= {tol.scripted_ee_rms_m * 1e3:g} mm "
-        f"(scripted) and <= {tol.random_ee_rms_m * 1e3:g} mm (random: open loop, the per-step differences add up); "
-        f"joint RMS gap <= {tol.joint_rms_rad:g} rad.",
+        f"Tolerances: FK error <= {tol.fk_m:.0e} m; in free space, end-effector RMS gap <= "
+        f"{tol.scripted_ee_rms_m * 1e3:g} mm (IK: scripted, press) and <= {tol.random_ee_rms_m * 1e3:g} mm (open "
+        f"loop: random, biased; the per-step differences add up), joint RMS gap <= {tol.joint_rms_rad:g} rad; in "
+        f"contact, end-effector RMS gap <= {tol.contact_scripted_ee_rms_m * 1e3:g} mm (IK) and <= "
+        f"{tol.contact_random_ee_rms_m * 1e3:g} mm (open loop); mean jerk within {tol.jerk_ratio:g} times the "
+        f"{report.reference}'s.",
         "",
         "**PASS**: every number is within tolerance." if not failures else "**FAIL**: " + "; ".join(failures) + ".",
         "",
@@ -375,6 +528,8 @@ def markdown(report: ParityReport) -> str:
 
 
 __all__ = [
+    "OPEN_LOOP",
+    "PHASES",
     "SEQUENCES",
     "Gap",
     "Kinematic",

@@ -4,9 +4,9 @@ The package, one job per module:
 
 * :mod:`~armreach_mujoco.urdf_import`: URDF → ``MjSpec`` (mesh conversion, missing inertials);
 * :mod:`~armreach_mujoco.world`: options, contacts, ground, markers, boxes, friction;
-* :mod:`~armreach_mujoco.servo`: position actuators that behave like PyBullet's motor;
+* :mod:`~armreach_mujoco.servo`: PyBullet's position motor, solved every physics step;
 * :mod:`~armreach_mujoco.compiled`: the compiled models, cached and shared read-only;
-* :mod:`~armreach_mujoco.dynamics`: per-env changes of masses, damping, gains (on a model copy);
+* :mod:`~armreach_mujoco.dynamics`: per-env changes of masses, damping, efforts (on a model copy);
 * :mod:`~armreach_mujoco.state`: reading and writing one env's ``MjData`` by name;
 * :mod:`~armreach_mujoco.render`: offscreen rendering;
 * this module: the :class:`~armreach_core.backend.Backend` facade over them.
@@ -33,6 +33,7 @@ from armreach_mujoco import dynamics
 from armreach_mujoco.compiled import CompiledModel, clear_cache, compiled_model
 from armreach_mujoco.engine import mujoco
 from armreach_mujoco.render import Renderer
+from armreach_mujoco.servo import POSITION_GAIN
 from armreach_mujoco.state import StateIO
 from armreach_mujoco.viewer import LiveViewer
 from armreach_mujoco.world import Box, Extras, Marker
@@ -103,7 +104,7 @@ class MuJoCoBackend(Backend):
 
     @property
     def compiled(self) -> CompiledModel:
-        """The model with the addresses of the robot's joints, actuators, bodies and markers."""
+        """The model with the addresses of the robot's joints, motors, bodies and markers."""
         return self._compiled
 
     # -- control -----------------------------------------------------------------------
@@ -124,7 +125,7 @@ class MuJoCoBackend(Backend):
         if start < self._half_dt:
             self._step_counting_warnings()
         else:
-            mujoco.mj_step(model, data, nstep=self.physics.substeps)
+            self._io.motors.step(model, data, self.physics.substeps)
             self._diverged = data.time < start + self._step_span
         # mj_step computes xpos before its last integration: bring the links up to qpos,
         # so that read_state is one snapshot
@@ -136,7 +137,7 @@ class MuJoCoBackend(Backend):
         warnings = self._data.warning
         for kind in _INSTABILITY_WARNINGS:
             warnings[kind].number = 0
-        mujoco.mj_step(self._model, self._data, nstep=self.physics.substeps)
+        self._io.motors.step(self._model, self._data, self.physics.substeps)
         self._diverged = any(warnings[kind].number > 0 for kind in _INSTABILITY_WARNINGS)
 
     def diverged(self) -> bool:
@@ -189,7 +190,7 @@ class MuJoCoBackend(Backend):
         dynamics.write_friction(self._writable(), self._compiled, self.robot, joint, float(friction))
 
     def effort_limit(self, joint: str) -> float:
-        return float(self._model.actuator_forcerange[self._compiled.actuators[dynamics.actuated(self.robot, joint)], 1])
+        return float(self._model.tendon_frictionloss[self._compiled.motors[dynamics.actuated(self.robot, joint)]])
 
     def set_effort_limit(self, joint: str, effort: float) -> None:
         dynamics.actuated(self.robot, joint)
@@ -197,13 +198,10 @@ class MuJoCoBackend(Backend):
         dynamics.write_effort(self._writable(), self._compiled, self.robot, joint, float(effort))
 
     def servo_gain(self, joint: str) -> float:
-        act = self._compiled.actuators[dynamics.actuated(self.robot, joint)]
-        return float(self._model.actuator_gainprm[act, 0] / self._compiled.model.actuator_gainprm[act, 0])
+        return float(self._io.motors.gains[dynamics.actuated(self.robot, joint)] / POSITION_GAIN)
 
     def set_servo_gain(self, joint: str, scale: float) -> None:
-        dynamics.actuated(self.robot, joint)
-        self._dynamics.gains[joint] = float(scale)
-        dynamics.write_gain(self._writable(), self._compiled, self.robot, joint, float(scale))
+        self._live().motors.gains[dynamics.actuated(self.robot, joint)] = POSITION_GAIN * float(scale)
 
     # -- markers -----------------------------------------------------------------------
     def add_marker(self, name: str, radius: float, rgba: tuple[float, float, float, float]) -> None:
@@ -251,6 +249,9 @@ class MuJoCoBackend(Backend):
 
     def contact_force(self, a: str, b: str) -> float:
         return self._io.contact_force(a, b)
+
+    def links_in_contact(self) -> tuple[str, ...]:
+        return self._io.links_in_contact()
 
     def set_friction(self, name: str, friction: float) -> None:
         self._live()

@@ -1,7 +1,7 @@
 """Compiled models, built once per (URDF, physics, extras) and shared read-only by every env.
 
 :func:`compiled_model` is the only way in: it builds the ``MjSpec`` (the URDF import, the
-servos, the world), compiles it, writes the servo gains and caches the result. From then
+motors, the world), compiles it and caches the result. From then
 on the ``MjModel`` is shared, and nothing may write it: each env has its own ``MjData``,
 and a renderer its own copy of the model (:mod:`armreach_mujoco.render`).
 """
@@ -45,27 +45,28 @@ class CompiledModel:
 
     Attributes:
         model: the ``mujoco.MjModel``, shared by every env built from the same inputs: read only.
-        qpos, qvel, actuators: addresses of the robot's joints in ``qpos``, ``qvel`` and
-            ``ctrl``, in ``robot.joint_names`` order (read-only arrays).
+        qpos, qvel: addresses of the robot's joints in ``qpos`` and ``qvel``, in
+            ``robot.joint_names`` order (read-only arrays); motors: the ids of their motor
+            tendons (:mod:`armreach_mujoco.servo`).
         bodies: MuJoCo body id by MuJoCo body name (URDF links keep their names).
         mocap: mocap index of each marker, by marker name.
         free: ``(qpos address, dof address)`` of each free box's joint, by box name.
         held_qpos, held_qvel: addresses of ``robot.held_joints`` in ``qpos`` and ``qvel``.
-        held_servos: indices in ``robot.held_joints`` of those held by a servo (the others
-            follow their master through a joint equality); held_actuators: their actuators.
+        held_servos: indices in ``robot.held_joints`` of those held by a motor (the others
+            follow their master through a joint equality); held_motors: their motor tendons.
     """
 
     model: Any
     qpos: Index
     qvel: Index
-    actuators: Index
+    motors: Index
     bodies: Mapping[str, int]
     mocap: Mapping[str, int]
     free: Mapping[str, tuple[int, int]]
     held_qpos: Index = field(default_factory=lambda: _index([]))
     held_qvel: Index = field(default_factory=lambda: _index([]))
     held_servos: Index = field(default_factory=lambda: _index([]))
-    held_actuators: Index = field(default_factory=lambda: _index([]))
+    held_motors: Index = field(default_factory=lambda: _index([]))
 
 
 _cache: OrderedDict[tuple[Any, ...], CompiledModel] = OrderedDict()
@@ -79,6 +80,7 @@ def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> Compiled
     world.set_arm_contacts(spec, robot, physics)
     servo.add_servos(spec, robot)
     world.add_scene(spec, physics, extras)
+    world.add_contact_pairs(spec, robot, physics, extras)
     try:
         with warnings.catch_warnings(record=True) as caught:  # a mesh's missing texture coordinates...
             warnings.simplefilter("always")
@@ -92,20 +94,18 @@ def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> Compiled
     names = robot.joint_names
     qpos = _index([int(model.jnt_qposadr[model.joint(n).id]) for n in names])
     qvel = _index([int(model.jnt_dofadr[model.joint(n).id]) for n in names])
-    actuators = _index([int(model.actuator(n).id) for n in names])
+    motors = _index([int(model.tendon(servo.MOTOR_PREFIX + n).id) for n in names])
     held = [j.name for j in robot.held_joints]
     held_qpos = _index([int(model.jnt_qposadr[model.joint(n).id]) for n in held])
     held_qvel = _index([int(model.jnt_dofadr[model.joint(n).id]) for n in held])
     held_servos = _index(servo.servoed_held(robot))
-    held_actuators = _index([int(model.actuator(held[i]).id) for i in held_servos])
+    held_motors = _index([int(model.tendon(servo.MOTOR_PREFIX + held[i]).id) for i in held_servos])
     held_home = robot.held_positions(robot.home)
-    servo.set_gains(
+    servo.cap_damping(
         model,
-        np.concatenate((qpos, held_qpos[held_servos])),
+        np.concatenate((qpos, held_qpos)),
         np.concatenate((qvel, held_qvel[held_servos])),
-        np.concatenate((actuators, held_actuators)),
-        np.concatenate((robot.home, held_home[held_servos])),
-        (held_qpos, held_home),
+        np.concatenate((robot.home, held_home)),
     )
 
     bodies = {model.body(i).name: i for i in range(model.nbody)}
@@ -119,22 +119,22 @@ def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> Compiled
         model=model,
         qpos=qpos,
         qvel=qvel,
-        actuators=actuators,
+        motors=motors,
         bodies=MappingProxyType(bodies),
         mocap=MappingProxyType(mocap),
         free=MappingProxyType(free),
         held_qpos=held_qpos,
         held_qvel=held_qvel,
         held_servos=held_servos,
-        held_actuators=held_actuators,
+        held_motors=held_motors,
     )
 
 
 def compiled_model(robot: RobotModel, physics: PhysicsConfig, extras: Extras | None = None) -> CompiledModel:
     """The compiled model for ``robot``, cached per (URDF, mtime, content, home, joints, base pose, physics, extras).
 
-    The gains and other constants of this package are not part of the key: after changing
-    one (when tuning), call :func:`clear_cache`.
+    The constants of this package are not part of the key: after changing one, call
+    :func:`clear_cache`.
     """
     extras = extras or Extras()
     try:
@@ -166,6 +166,6 @@ def compiled_model(robot: RobotModel, physics: PhysicsConfig, extras: Extras | N
 
 
 def clear_cache() -> None:
-    """Forget every compiled model (for tests, and after changing a gain when tuning)."""
+    """Forget every compiled model (for tests, and after changing a constant of this package)."""
     with _cache_lock:
         _cache.clear()

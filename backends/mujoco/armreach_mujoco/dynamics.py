@@ -1,4 +1,4 @@
-"""Per-env changes to the dynamics (masses, damping, friction, servo gain, effort), on the env's own model copy.
+"""Per-env changes to the dynamics (masses, damping, friction, effort), on the env's own model copy.
 
 The compiled ``MjModel`` is shared by every env of the same URDF (:mod:`armreach_mujoco.compiled`)
 and is never written. An env whose dynamics change gets its own copy, made on the first
@@ -9,11 +9,11 @@ previous change, so repeated changes do not drift.
 * mass: ``body_mass``, with ``body_inertia`` scaled by the same ratio (same density);
 * damping: ``dof_damping``;
 * friction: ``dof_frictionloss``, MuJoCo's Coulomb friction, solved as a constraint;
-* servo gain: the position term of the servo (``kp`` in ``gainprm[0]`` and
-  ``-biasprm[1]``), which sets the fraction of the error closed per step, as PyBullet's
-  ``positionGain`` does; its damping ``kv`` stays;
-* effort: the actuator's ``forcerange`` and the joint's ``actfrcrange`` (which bounds servo
-  and gravity compensation together).
+* effort: the ``frictionloss`` of the joint's motor tendon, the bound of its motor row
+  (:mod:`armreach_mujoco.servo`).
+
+A motor's position gain is not part of the model: it lives with the env's motors
+(:class:`armreach_mujoco.servo.Motors`).
 """
 
 from __future__ import annotations
@@ -35,16 +35,15 @@ FRICTION_IMPEDANCE = (0.9999, 0.9999)
 
 @dataclass
 class Dynamics:
-    """The changes one env made, by URDF link or joint name (absolute values; gain a scale)."""
+    """The changes one env made, by URDF link or joint name (absolute values)."""
 
     masses: dict[str, float] = field(default_factory=dict)
     dampings: dict[str, float] = field(default_factory=dict)
     frictions: dict[str, float] = field(default_factory=dict)
     efforts: dict[str, float] = field(default_factory=dict)
-    gains: dict[str, float] = field(default_factory=dict)
 
     def __bool__(self) -> bool:
-        return bool(self.masses or self.dampings or self.frictions or self.efforts or self.gains)
+        return bool(self.masses or self.dampings or self.frictions or self.efforts)
 
     def own_copy(self, compiled: CompiledModel, robot: RobotModel) -> Any:
         """A copy of ``compiled.model`` with every change written into it."""
@@ -57,8 +56,6 @@ class Dynamics:
             write_friction(model, compiled, robot, joint, self.frictions[joint])
         for joint in self.efforts:
             write_effort(model, compiled, robot, joint, self.efforts[joint])
-        for joint in self.gains:
-            write_gain(model, compiled, robot, joint, self.gains[joint])
         return model
 
 
@@ -101,12 +98,4 @@ def write_friction(model: Any, compiled: CompiledModel, robot: RobotModel, joint
 
 def write_effort(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, effort: float) -> None:
     i = actuated(robot, joint)
-    model.actuator_forcerange[compiled.actuators[i]] = (-effort, effort)
-    model.jnt_actfrcrange[model.dof_jntid[compiled.qvel[i]]] = (-effort, effort)
-
-
-def write_gain(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, scale: float) -> None:
-    act = compiled.actuators[actuated(robot, joint)]
-    kp = float(compiled.model.actuator_gainprm[act, 0]) * scale
-    model.actuator_gainprm[act, 0] = kp
-    model.actuator_biasprm[act, 1] = -kp
+    model.tendon_frictionloss[compiled.motors[i]] = effort

@@ -1,26 +1,39 @@
-"""Position control matched to PyBullet's ``POSITION_CONTROL`` motor.
+"""PyBullet's ``POSITION_CONTROL`` motor, solved by MuJoCo's constraint solver every physics step.
 
-PyBullet's motor is a velocity-level constraint: each physics step it asks for the joint
-velocity ``positionGain * (target - q) / dt`` (``velocityGain`` 1 cancels the current
-velocity) and reaches it with at most the URDF effort, so the arm holds its pose against
-gravity and closes 20 % of the remaining error per physics step. MuJoCo has no such
-motor; each joint gets
+PyBullet's position motor (Bullet's ``btMultiBodyJointMotor``) is a row of Bullet's
+constraint solver: each physics step it asks that the joint's velocity *after* the step be
 
-* a position actuator forming the velocity servo ``force = kv * (lambda * (target - q) - qd)``,
-  ``lambda = POSITION_GAIN / dt``, ``kv = SERVO_DAMPING * M_ii(home) / dt`` (a true
-  constraint is ``kv -> inf``, but MuJoCo clamps the force before the implicit integrator
-  divides it by ``1 + kv dt / M``, so a large ``kv`` chatters);
-* gravity compensation routed through the actuator (``gravcomp`` on the arm's bodies,
-  ``actuatorgravcomp`` on its joints), the joint's force range = URDF effort bounding
-  servo and compensation together;
-* :data:`ARMATURE` rotor inertia, and the URDF damping (URDF ``friction`` is dropped, as
-  PyBullet ignores it).
+    v* = positionGain * (target - q) / dt + velocityGain * (0 - v) + v,
 
-Joints the arm does not actuate (``robot.held_joints``) get the same servo, held at their
-hold position; a mimic joint whose master moves gets no servo but a joint equality
+which with ``velocityGain`` 1 is ``positionGain * (target - q) / dt``, with an impulse of at
+most ``effort * dt``; the rows of all motors are solved together with the arm's dynamics.
+The arm therefore holds its pose against gravity exactly and closes ``positionGain`` of the
+remaining error per physics step, unless a motor runs out of force.
+
+MuJoCo has no such motor, but its constraint solver has the row it needs: a friction-loss
+row bounds its force by ``frictionloss`` and is solved together with contacts and joint
+limits, as Bullet solves its motor rows. Each motor is a fixed tendon on its joint with
+``frictionloss`` = the URDF effort and the stiffest impedance; between ``mj_step1`` and
+``mj_step2`` (:class:`Motors`) its reference acceleration, which MuJoCo would aim at zero
+velocity, is rewritten to ``(v* - v) / dt``. The solver then brings the joint to ``v*`` when
+the effort allows it, and pushes with the effort when not, against gravity, contacts and
+the other motors at once.
+
+Joint damping is a torque ``-D v`` from the velocity before the step, as PyBullet applies
+it (MuJoCo's Euler step without its implicit damping); it only matters while a motor is at
+its effort. On a joint so light that ``dt D / M_ii > 1`` at home, that explicit torque would
+reverse the joint's velocity within a step and ring; :func:`cap_damping` bounds ``D`` there
+by ``M_ii / dt``, the damping that stops the joint in one step.
+
+Nothing here is fitted to an arm: the motor's only constants are PyBullet's gains. The
+arm gets no rotor inertia (armature) and no gravity compensation, as in PyBullet; URDF
+``friction`` is dropped, as PyBullet ignores it.
+
+Joints the arm does not actuate (``robot.held_joints``) get the same motor, held at their
+hold position; a mimic joint whose master moves gets no motor but a joint equality
 (``mjEQ_JOINT``) that makes it follow its master, as the URDF says.
 
-How these values were searched, and the remaining gap, in ``docs/mujoco-backend.md``.
+The measurements in ``docs/mujoco-backend.md``.
 """
 
 from __future__ import annotations
@@ -35,38 +48,32 @@ from armreach_core.errors import ArmReachError
 from armreach_core.robot import HeldJoint, RobotModel
 from armreach_mujoco.engine import mujoco
 
-#: PyBullet's ``positionGain``, which the servo imitates.
+#: PyBullet's ``positionGain`` (the backend's), the fraction of the error closed per physics step.
 POSITION_GAIN = 0.2
-#: Servo damping kv of joint i = SERVO_DAMPING * (M_ii at home + armature) / dt.
-SERVO_DAMPING = 2.0
-#: Rotor inertia added to every actuated joint (kg m², or kg for prismatic joints).
-ARMATURE = 0.01
+#: Impedance of the motor rows (``solimp``'s first two values): MuJoCo's stiffest.
+MOTOR_IMPEDANCE = (0.9999, 0.9999, 0.001, 0.5, 2.0)
+#: Name prefix of the motor tendons.
+MOTOR_PREFIX = "armreach_motor_"
 
 
 def add_servos(spec: Any, robot: RobotModel) -> None:
-    """Gravity compensation on every body of the spec, one servo per joint of ``robot``, then
-    one per held joint that follows no moving master, and the equalities of mimic joints.
-
-    Call before adding bodies that must fall (boxes). The gains are placeholders until
-    :func:`set_gains` runs on the compiled model.
+    """One motor per joint of ``robot``, then one per held joint that follows no moving master,
+    and the equalities of mimic joints. Motor tendons are created in that order.
     """
-    for body in spec.bodies:
-        if body.name != "world":
-            body.gravcomp = 1.0
     for joint_spec in robot.joints:
-        _add_servo(spec, robot, joint_spec.name, joint_spec.effort, joint_spec.damping)
+        _add_motor(spec, robot, joint_spec.name, joint_spec.effort, joint_spec.damping)
     for held in robot.held_joints:
         if follows(robot, held):
             _follow(spec, robot, held)
         else:
-            _add_servo(spec, robot, held.name, held.effort, None)
+            _add_motor(spec, robot, held.name, held.effort, None)
             for equality in list(spec.equalities):  # MuJoCo's importer ties every mimic joint
                 if equality.type == mujoco.mjtEq.mjEQ_JOINT and equality.name1 == held.name:
                     spec.delete(equality)
 
 
 def follows(robot: RobotModel, held: HeldJoint) -> bool:
-    """Whether a held joint follows a moving master through a joint equality (and has no servo)."""
+    """Whether a held joint follows a moving master through a joint equality (and has no motor)."""
     if held.mimic is None:
         return False
     master = next((j for j in robot.parsed.model.robot.joints if str(j.name) == held.mimic.joint), None)
@@ -74,25 +81,22 @@ def follows(robot: RobotModel, held: HeldJoint) -> bool:
 
 
 def servoed_held(robot: RobotModel) -> list[int]:
-    """Indices in ``robot.held_joints`` of the held joints that have a servo."""
+    """Indices in ``robot.held_joints`` of the held joints that have a motor."""
     return [i for i, held in enumerate(robot.held_joints) if not follows(robot, held)]
 
 
-def _add_servo(spec: Any, robot: RobotModel, name: str, effort: float, damping: float | None) -> None:
+def _add_motor(spec: Any, robot: RobotModel, name: str, effort: float, damping: float | None) -> None:
     joint = spec.joint(name)
     if joint is None:
         raise ArmReachError(f"MuJoCo did not create joint {name!r} of {robot.urdf_path}")
     if damping is not None:
         joint.damping = [damping, *list(joint.damping)[1:]]  # mujoco 4 adds nonlinear terms
     joint.frictionloss = 0.0
-    joint.armature = ARMATURE
-    joint.actgravcomp = True
-    joint.actfrclimited = mujoco.mjtLimited.mjLIMITED_TRUE
-    joint.actfrcrange = [-effort, effort]
-    act = spec.add_actuator(name=name, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-    act.set_to_position(kp=1.0, kv=1.0)
-    act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-    act.forcerange = [-effort, effort]
+    joint.armature = 0.0
+    tendon = spec.add_tendon(name=MOTOR_PREFIX + name)
+    tendon.wrap_joint(name, 1.0)
+    tendon.frictionloss = effort
+    tendon.solimp_friction = list(MOTOR_IMPEDANCE)
 
 
 def _follow(spec: Any, robot: RobotModel, held: HeldJoint) -> None:
@@ -113,38 +117,55 @@ def _follow(spec: Any, robot: RobotModel, held: HeldJoint) -> None:
     equality.data = data.tolist()
     joint = spec.joint(held.name)
     joint.frictionloss = 0.0
-    joint.armature = ARMATURE
+    joint.armature = 0.0
 
 
-def set_gains(
-    model: Any,
-    qpos: npt.NDArray[np.intp],
-    qvel: npt.NDArray[np.intp],
-    actuators: npt.NDArray[np.intp],
-    home: npt.NDArray[np.float64],
-    others: tuple[npt.NDArray[np.intp], npt.NDArray[np.float64]] | None = None,
+def cap_damping(
+    model: Any, qpos: npt.NDArray[np.intp], qvel: npt.NDArray[np.intp], home: npt.NDArray[np.float64]
 ) -> None:
-    """Write each servo's ``kp`` and ``kv`` from the joint-space inertia at ``home``.
+    """Bound each motor joint's damping by ``M_ii / dt`` at ``home`` (see the module's docstring).
 
-    ``others``: ``qpos`` addresses and values of joints without a servo here (held joints)
-    to set first. Part of building ``model``, before anyone shares it.
+    Part of building ``model``, before anyone shares it.
     """
     data = mujoco.MjData(model)
-    if others is not None:
-        data.qpos[others[0]] = others[1]
     data.qpos[qpos] = home
     mujoco.mj_forward(model, data)
-    diag = np.empty(len(qvel))
     unit, column = np.zeros(model.nv), np.zeros(model.nv)
-    for i, dof in enumerate(qvel):  # M_ii through mj_mulM: the same call in mujoco 3 and 4
+    dt = float(model.opt.timestep)
+    for dof in qvel:  # M_ii through mj_mulM: the same call in mujoco 3 and 4
         unit[:] = 0.0
         unit[dof] = 1.0
         mujoco.mj_mulM(model, data, column, unit)
-        diag[i] = column[dof]
-    timestep = float(model.opt.timestep)
-    kv = SERVO_DAMPING * diag / timestep
-    kp = kv * POSITION_GAIN / timestep
-    for act, p, v in zip(actuators, kp, kv, strict=True):
-        model.actuator_gainprm[act, 0] = p
-        model.actuator_biasprm[act, 1] = -p
-        model.actuator_biasprm[act, 2] = -v
+        model.dof_damping[dof] = min(float(model.dof_damping[dof]), column[dof] / dt)
+
+
+class Motors:
+    """The motors of one env: their targets and gains, and the physics steps that apply them.
+
+    Args:
+        qpos, qvel: addresses of the motor joints (the arm's, then the servoed held joints)
+            in ``qpos`` and ``qvel``.
+
+    The motor rows are the model's last friction rows, one per motor in order: the model
+    has no other tendon with friction, and every motor's effort is positive.
+    """
+
+    def __init__(self, qpos: npt.NDArray[np.intp], qvel: npt.NDArray[np.intp]) -> None:
+        self.qpos, self.qvel = qpos, qvel
+        self.targets = np.zeros(len(qvel))
+        self.gains = np.full(len(qvel), POSITION_GAIN)
+
+    def step(self, model: Any, data: Any, nstep: int) -> None:
+        """``nstep`` physics steps, the motors solved in each."""
+        qpos_i, qvel_i, n = self.qpos, self.qvel, len(self.qvel)
+        dt = float(model.opt.timestep)
+        rate = self.gains / dt
+        qpos, qvel = data.qpos, data.qvel
+        for _ in range(nstep):
+            mujoco.mj_step1(model, data)
+            first = data.ne + data.nf - n
+            data.efc_aref[first : first + n] = (rate * (self.targets - qpos[qpos_i]) - qvel[qvel_i]) / dt
+            mujoco.mj_step2(model, data)
+
+
+__all__ = ["MOTOR_PREFIX", "POSITION_GAIN", "Motors", "add_servos", "cap_damping", "follows", "servoed_held"]

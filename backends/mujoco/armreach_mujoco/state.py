@@ -18,6 +18,7 @@ from armreach_core.errors import ArmReachError
 from armreach_core.robot import FloatArray, RobotModel
 from armreach_mujoco.compiled import CompiledModel
 from armreach_mujoco.engine import mujoco
+from armreach_mujoco.servo import Motors
 from armreach_mujoco.world import BODY_PREFIX
 
 
@@ -29,38 +30,44 @@ class StateIO:
         self.compiled = compiled
         self.model = compiled.model
         self.data = data
-        self._qpos, self._qvel, self._act = compiled.qpos, compiled.qvel, compiled.actuators
+        self._qpos, self._qvel = compiled.qpos, compiled.qvel
         self._ee = compiled.bodies[robot.ee_link]
         self._held = len(robot.held_joints) > 0
         self._held_targets = np.array([robot.held_joints[i].position for i in compiled.held_servos])
         self._has_free = bool(compiled.free)
+        servoed = compiled.held_servos
+        #: the motors: the arm's joints first, then the held joints that have one
+        self.motors = Motors(
+            np.concatenate((self._qpos, compiled.held_qpos[servoed])),
+            np.concatenate((self._qvel, compiled.held_qvel[servoed])),
+        )
+        self._targets = self.motors.targets[: robot.dof]  # a view: the arm's motor targets
         # MjData's arrays, fetched once (each attribute access costs a binding call)
-        self._ctrl, self._qpos_all, self._qvel_all, self._xpos = data.ctrl, data.qpos, data.qvel, data.xpos
+        self._qpos_all, self._qvel_all, self._xpos = data.qpos, data.qvel, data.xpos
 
     # -- writes ------------------------------------------------------------------------
     def home(self) -> None:
         """The arm at home, holding it."""
         self._qpos_all[self._qpos] = self.robot.home
-        self._ctrl[self._act] = self.robot.home
+        self._targets[:] = self.robot.home
         self._hold(self.robot.home)
         mujoco.mj_forward(self.model, self.data)
 
     def _hold(self, q: FloatArray) -> None:
-        """Held joints (fingers...) where they belong when the arm is at ``q``, their servos holding them."""
+        """Held joints (fingers...) where they belong when the arm is at ``q``, their motors holding them."""
         if self._held:
-            compiled = self.compiled
-            self.data.qpos[compiled.held_qpos] = self.robot.held_positions(q)
-            self.data.ctrl[compiled.held_actuators] = self._held_targets
+            self.data.qpos[self.compiled.held_qpos] = self.robot.held_positions(q)
+            self.motors.targets[self.robot.dof :] = self._held_targets
 
     def carry_over(self, old: StateIO) -> None:
         """Take the arm's, the boxes' and the markers' state from ``old`` (another model of the same robot)."""
         data, before = self.data, old.compiled
         data.qpos[self._qpos] = old.data.qpos[before.qpos]
         data.qvel[self._qvel] = old.data.qvel[before.qvel]
-        data.ctrl[self._act] = old.data.ctrl[before.actuators]
         data.qpos[self.compiled.held_qpos] = old.data.qpos[before.held_qpos]
         data.qvel[self.compiled.held_qvel] = old.data.qvel[before.held_qvel]
-        data.ctrl[self.compiled.held_actuators] = old.data.ctrl[before.held_actuators]
+        self.motors.targets[:] = old.motors.targets
+        self.motors.gains[:] = old.motors.gains
         data.time = old.data.time
         for name, (qadr, vadr) in self.compiled.free.items():
             if name in before.free:
@@ -79,12 +86,12 @@ class StateIO:
         data.qpos[self._qpos] = values
         data.qvel[:] = 0.0
         data.qacc_warmstart[:] = 0.0
-        data.ctrl[self._act] = values
+        self._targets[:] = values
         self._hold(values)
         mujoco.mj_forward(self.model, data)
 
     def set_joint_targets(self, q: FloatArray) -> None:
-        self._ctrl[self._act] = q
+        self._targets[:] = q
 
     def set_marker(self, name: str, position: FloatArray) -> None:
         try:
@@ -147,6 +154,20 @@ class StateIO:
                 mujoco.mj_contactForce(model, data, i, wrench)
                 total += float(wrench[0])
         return total
+
+    def links_in_contact(self) -> tuple[str, ...]:
+        model, data = self.model, self.data
+        if data.ncon == 0:
+            return ()
+        geom_body = model.geom_bodyid
+        touching = set()
+        for contact in data.contact[: data.ncon]:
+            touching.add(int(geom_body[contact.geom1]))
+            touching.add(int(geom_body[contact.geom2]))
+        robot, bodies = self.robot, self.compiled.bodies
+        return tuple(
+            link for link in robot.link_names if link not in robot.fixed_links and bodies.get(link, -1) in touching
+        )
 
     # -- names -------------------------------------------------------------------------
     def _body_id(self, name: str) -> int:

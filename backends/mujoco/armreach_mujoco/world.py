@@ -8,6 +8,13 @@ Contacts
     exclusion also covers the base, which is welded to the world and so escapes MuJoCo's
     own parent-child filter.
 
+    Friction is Bullet's: every pair the arm, the ground and the boxes can form is an
+    explicit MuJoCo contact pair whose coefficient is the *product* of the two surfaces'
+    lateral frictions, as Bullet combines them (MuJoCo would take the larger). A link's
+    friction is its URDF ``<contact><lateral_friction>``, else PyBullet's default 0.5, or
+    what a task set; the ground's is PyBullet's 0.5. Arm-arm contacts (with
+    ``self_collision``) keep MuJoCo's rule.
+
     MuJoCo's contacts are soft where PyBullet's are rigid, so once a box is added the model
     gets the noslip solver and the boxes' contacts the stiffest safe time constant; a
     gripped cube then does not slide, but still sinks a few mm in the grip. The
@@ -16,6 +23,8 @@ Contacts
 
 from __future__ import annotations
 
+import contextlib
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from typing import Any
 
@@ -39,6 +48,14 @@ MARKER_PREFIX = "armreach_marker_"
 NOSLIP_ITERATIONS = 10
 BODY_SOLREF_STEPS = 2.0
 BODY_SOLMIX = 100.0
+#: The arm's contacts with the ground, as close to Bullet's rigid ones as MuJoCo stays stable:
+#: the time constant in physics steps (2 is MuJoCo's floor) and the solver impedance.
+CONTACT_SOLREF_STEPS = 2.0
+CONTACT_IMPEDANCE = (0.99, 0.99, 0.001, 0.5, 2.0)
+#: PyBullet's lateral friction of a link or body that does not set one (the ground's too).
+DEFAULT_FRICTION = 0.5
+GROUND = "armreach_ground"
+ARM_GEOM_PREFIX = "armreach_geom_"
 
 
 @dataclass(frozen=True)
@@ -71,10 +88,12 @@ class Extras:
 
 
 def set_options(spec: Any, physics: PhysicsConfig) -> None:
-    """Timestep, gravity, the ``implicitfast`` integrator, inertia bounds, headlight."""
+    """Timestep, gravity, the integrator, inertia bounds, headlight."""
     spec.option.timestep = physics.timestep
     spec.option.gravity = list(physics.gravity)
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    # semi-implicit Euler with explicit joint damping, as Bullet integrates (see armreach_mujoco.servo)
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_EULER
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_EULERDAMP
     spec.compiler.boundmass = 1e-6
     spec.compiler.boundinertia = 1e-10
     if not physics.inertia_from_file:
@@ -102,10 +121,7 @@ def set_arm_contacts(spec: Any, robot: RobotModel, physics: PhysicsConfig) -> No
 
 
 def add_scene(spec: Any, physics: PhysicsConfig, extras: Extras) -> None:
-    """A white sky like PyBullet's, a light, the ground, markers, boxes and link frictions.
-
-    Call after the servos are added: the boxes must not get the arm's gravity compensation.
-    """
+    """A white sky like PyBullet's, a light, the ground, markers, boxes and link frictions."""
     spec.add_texture(
         name="armreach_sky",
         type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
@@ -119,7 +135,7 @@ def add_scene(spec: Any, physics: PhysicsConfig, extras: Extras) -> None:
     world.add_light(pos=[0.0, -0.5, 3.0], dir=[0.0, 0.2, -1.0], diffuse=[0.5, 0.5, 0.5], castshadow=False)
     if physics.ground:
         world.add_geom(
-            name="armreach_ground",
+            name=GROUND,
             type=mujoco.mjtGeom.mjGEOM_PLANE,
             size=[1.5, 1.5, 0.01],
             rgba=list(GROUND_RGBA),
@@ -146,6 +162,7 @@ def add_scene(spec: Any, physics: PhysicsConfig, extras: Extras) -> None:
         if box.mass > 0:
             body.add_freejoint(name=BODY_PREFIX + box.name)
         body.add_geom(
+            name=BODY_PREFIX + box.name,
             type=mujoco.mjtGeom.mjGEOM_BOX,
             size=list(box.half_extents),
             rgba=list(box.rgba),
@@ -160,3 +177,57 @@ def add_scene(spec: Any, physics: PhysicsConfig, extras: Extras) -> None:
     for link, friction in extras.frictions:
         for geom in spec.body(link).geoms:
             geom.friction = [friction, *list(geom.friction)[1:]]
+
+
+def link_frictions(robot: RobotModel) -> dict[str, float]:
+    """Each link's lateral friction as PyBullet reads it: ``<contact><lateral_friction value>``, else 0.5."""
+    frictions = dict.fromkeys(robot.link_names, DEFAULT_FRICTION)
+    root = ET.fromstring(robot.parsed.resolved_xml)
+    for link in root.iter("link"):
+        element = link.find("contact/lateral_friction")
+        if element is not None and link.get("name") in frictions:
+            with contextlib.suppress(ValueError):  # PyBullet keeps its default too
+                frictions[str(link.get("name"))] = float(element.get("value", DEFAULT_FRICTION))
+    return frictions
+
+
+def add_contact_pairs(spec: Any, robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> None:
+    """Explicit contact pairs with Bullet's friction (the product) between arm, ground and boxes.
+
+    Call last: the arm's geoms are those of the URDF's links that collide.
+    """
+    frictions = link_frictions(robot)
+    frictions.update(dict(extras.frictions))
+    links = set(robot.link_names)
+    static = robot.fixed_links
+    arm: list[tuple[str, float, bool]] = []  # (geom name, friction, fixed to the world)
+    for body in spec.bodies:
+        if body.name not in links:
+            continue
+        for geom in body.geoms:
+            if geom.contype & ARM_CONTYPE:
+                if not geom.name:
+                    geom.name = f"{ARM_GEOM_PREFIX}{len(arm)}"
+                arm.append((geom.name, frictions[body.name], body.name in static))
+    surfaces = [(GROUND, DEFAULT_FRICTION)] if physics.ground else []
+    boxes = [(BODY_PREFIX + box.name, box.friction) for box in extras.boxes]
+    box_solref = [BODY_SOLREF_STEPS * physics.timestep, 1.0]  # as the boxes' own geoms
+    stiff = [CONTACT_SOLREF_STEPS * physics.timestep, 1.0]
+    for name, friction, fixed in arm:
+        for surface, other in surfaces if not fixed else ():  # MuJoCo skips static-static pairs too
+            _pair(spec, name, surface, friction * other, stiff, CONTACT_IMPEDANCE)
+        for box, other in boxes:
+            _pair(spec, name, box, friction * other, box_solref, None)
+    for i, (box, friction) in enumerate(boxes):
+        for surface, other in [*surfaces, *boxes[i + 1 :]]:
+            _pair(spec, box, surface, friction * other, box_solref, None)
+
+
+def _pair(
+    spec: Any, geom1: str, geom2: str, friction: float, solref: list[float], solimp: tuple[float, ...] | None
+) -> None:
+    pair = spec.add_pair(geomname1=geom1, geomname2=geom2)
+    pair.friction = [friction, friction, 0.005, 0.0001, 0.0001]
+    pair.solref = solref
+    if solimp is not None:
+        pair.solimp = list(solimp)

@@ -380,6 +380,19 @@ class PyBulletBackend(Backend):
         )
         return float(sum(point[9] for point in points))
 
+    def links_in_contact(self) -> tuple[str, ...]:
+        body, touching = self._body, set()
+        for point in pb.getContactPoints(bodyA=body, physicsClientId=self._client):
+            if point[8] <= 0.0 or point[9] > 0.0:  # penetrating, or pushing: not a speculative point
+                if point[1] == body:
+                    touching.add(point[3])
+                if point[2] == body:
+                    touching.add(point[4])
+        index, robot = self._link_index, self.robot
+        return tuple(
+            link for link in robot.link_names if link not in robot.fixed_links and index.get(link, -2) in touching
+        )
+
     def set_friction(self, name: str, friction: float) -> None:
         body, link = self._shape(name)
         pb.changeDynamics(body, link, lateralFriction=float(friction), physicsClientId=self._client)
