@@ -20,6 +20,7 @@ from armreach_core.anatomy import MOVABLE_TYPES
 from armreach_core.corpus import CORPUS, CorpusArm
 from armreach_core.loading import load_robot
 from armreach_core.robot import RobotModel
+from armreach_core.smoothness import mean_jerk
 from tests.conftest import BACKENDS
 
 #: Arms whose meshes make their tests take 2-7 s on a 2-core machine (measured with a cold
@@ -219,3 +220,36 @@ def test_observation_is_one_consistent_snapshot(arm: CorpusArm, backend: str) ->
         assert worst < 1e-6, f"{arm.name} on {backend}: {worst:.2e} m"  # float32's precision at arm scale
     finally:
         env.close()
+
+
+#: Free space: ``armreach parity``'s tolerances hold on every arm, but for xArm7's joint angles
+#: under random actions: its aligned joints 1, 3, 5 and 7 drift apart in the null space
+#: (measured 0.028 rad, the end effector 6.5 mm; docs/parity.md).
+FREE_JOINT_RMS = {"xarm7": 0.035}
+
+
+@pytest.mark.skipif(not {"pybullet", "mujoco"} <= set(BACKENDS), reason="needs the PyBullet and MuJoCo backends")
+@pytest.mark.parametrize("arm", _arms())
+def test_engines_agree_in_free_space(arm: CorpusArm) -> None:
+    """Random actions and the IK reach, 200 steps from home: the same motion on both engines until
+    a moving link first touches something, and the same smoothness (jerk) throughout."""
+    from armreach_core.env import ArmEnv
+    from armreach_core.tools.parity import Gap, Tolerances, drive
+
+    tol = Tolerances()
+    envs = {name: ArmEnv("reach", backend=name, urdf=_path(arm)) for name in ("pybullet", "mujoco")}
+    try:
+        for sequence in ("random", "scripted"):
+            runs = {name: drive(env, sequence, steps=200, seed=0) for name, env in envs.items()}
+            gap = Gap.between(runs["pybullet"], runs["mujoco"])
+            if gap.free_ee_rms_m is None:
+                continue  # touching from the first step: nothing to compare in free space
+            where = f"{arm.name} {sequence}"
+            assert gap.free_ee_rms_m <= tol.ee_rms_m(sequence), f"{where}: {gap.free_ee_rms_m * 1e3:.2f} mm"
+            joint_bound = FREE_JOINT_RMS.get(arm.name, tol.joint_rms_rad) if sequence == "random" else tol.joint_rms_rad
+            assert gap.free_joint_rms_rad is not None and gap.free_joint_rms_rad <= joint_bound, where
+            jerks = [mean_jerk(run.q, envs["pybullet"].physics.control_dt) for run in runs.values()]
+            assert max(jerks) <= tol.jerk_ratio * min(jerks), f"{where}: jerk {jerks}"
+    finally:
+        for env in envs.values():
+            env.close()

@@ -31,9 +31,8 @@ pytestmark = pytest.mark.skipif(not BACKENDS, reason="no physics backend install
 PAIR = ("pybullet", "mujoco")
 needs_both = pytest.mark.skipif(not set(PAIR) <= set(BACKENDS), reason="needs the PyBullet and MuJoCo backends")
 #: Object-pose parity of the scripted grasp, PyBullet against MuJoCo (m). Measured over seeds
-#: 0-19: RMS gap 0.6-6.5 mm (mean 1.8), largest gap 19 mm; MuJoCo's soft contacts let the
-#: lifted cube sink a few mm in the grip (see docs/mujoco-backend.md, "Contacts").
-PARITY_RMS, PARITY_MAX = 0.010, 0.025
+#: 0-19: RMS gap 0.02-0.16 mm (mean 0.05), largest gap 0.48 mm (docs/parity.md, "Grasp").
+PARITY_RMS, PARITY_MAX = 0.0005, 0.002
 
 
 @pytest.fixture(params=BACKENDS)

@@ -34,7 +34,7 @@ AR6_HOME = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
 DYNAMIC_BOUNDS = {
     # (arm, sequence): (joint RMS rad, EE RMS m)
     ("ar6", "random"): (0.012, 0.006),  # measured 0.0066 rad, 3.7 mm (0.25 mm before the contact)
-    ("ar6", "scripted"): (0.001, 0.0001),  # measured 0.0002 rad, 0.004 mm
+    ("ar6", "scripted"): (0.001, 0.0001),  # measured 0.0002 rad, 0.004 mm (free space 0.001 mm)
     ("xarm6", "random"): (0.001, 0.0005),  # measured 0.0002 rad, 0.16 mm
     ("xarm6", "scripted"): (0.001, 0.0005),  # measured 0.0002 rad, 0.09 mm
 }
@@ -103,6 +103,126 @@ def test_position_control_tracks_pybullet(xarm_urdf, arm, sequence):
     joint_bound, ee_bound = DYNAMIC_BOUNDS[(arm, sequence)]
     assert gap.joint_rms_rad < joint_bound, f"joint RMS gap {gap.joint_rms_rad:.4f} rad"
     assert gap.ee_rms_m < ee_bound, f"end-effector RMS gap {gap.ee_rms_m * 1000:.1f} mm"
+
+
+#: Contact phases of ar6, seed 0 (the parity report's sequences): measured, in the comments.
+CONTACT_BOUNDS = {
+    # sequence: (first contact step on both engines, contact-phase EE RMS bound m)
+    "biased": (27, 0.012),  # 6.7 mm (before the motor of PyBullet's kind: 124 mm)
+    "press": (12, 0.006),  # 2.4 mm
+}
+
+
+@pytest.mark.parametrize("sequence", sorted(CONTACT_BOUNDS))
+def test_contact_phase_tracks_pybullet(sequence):
+    pytest.importorskip("pybullet")
+    runs = {}
+    for name in ("pybullet", "mujoco"):
+        env = ArmEnv("reach", backend=name)
+        runs[name] = parity.drive(env, sequence, steps=200, seed=0)
+        env.close()
+    first, bound = CONTACT_BOUNDS[sequence]
+    assert runs["pybullet"].first_contact == runs["mujoco"].first_contact == first
+    assert runs["pybullet"].first_contact_links == runs["mujoco"].first_contact_links
+    gap = parity.Gap.between(runs["pybullet"], runs["mujoco"])
+    assert gap.contact_step == first
+    assert gap.free_ee_rms_m is not None and gap.free_ee_rms_m < 0.001
+    assert gap.contact_ee_rms_m is not None and gap.contact_ee_rms_m < bound
+
+
+def test_motor_rows_are_the_last_friction_rows():
+    """Motors.step writes the reference of the last friction rows: they must be the motor tendons,
+    in motor order, with boxes, mimic equalities and joint friction in the model too."""
+    grasp = pytest.importorskip("armreach_grasp")
+    env = ArmEnv("grasp", backend="mujoco")
+    env.reset(seed=0)
+    backend = env.backend
+    backend.set_joint_friction(backend.robot.joint_names[0], 0.5)  # a dof friction row before them
+    model, data, shared = backend.model, backend.data, backend.compiled
+    motors = np.concatenate((shared.motors, shared.held_motors))
+    assert len(motors) == len(backend._io.motors.qvel)
+    mujoco.mj_step1(model, data)
+    first = data.ne + data.nf - len(motors)
+    rows = slice(first, first + len(motors))
+    assert np.all(data.efc_type[rows] == mujoco.mjtConstraint.mjCNSTR_FRICTION_TENDON)
+    np.testing.assert_array_equal(data.efc_id[rows], motors)
+    np.testing.assert_allclose(data.efc_frictionloss[rows], model.tendon_frictionloss[motors])
+    assert grasp is not None
+    env.close()
+
+
+def test_a_motor_pushes_with_its_effort_and_no_more():
+    """A joint asked to move further than its effort allows moves as PyBullet's does."""
+    pytest.importorskip("pybullet")
+    from armreach_core.statics import gravity_torques
+
+    finals = {}
+    for name in ("pybullet", "mujoco"):
+        env = ArmEnv("reach", backend=name)
+        env.reset(seed=0)
+        torques = np.abs(gravity_torques(env.robot, env.robot.home))
+        joint = int(np.argmax(torques))
+        env.backend.set_effort_limit(env.robot.joint_names[joint], 0.5 * torques[joint])  # cannot hold the arm up
+        for _ in range(20):
+            env.backend.set_joint_targets(env.robot.home)
+            env.backend.step()
+        finals[name] = env.backend.read_state().q
+        env.close()
+    assert abs(finals["pybullet"][joint] - env.robot.home[joint]) > 0.05  # it sagged
+    np.testing.assert_allclose(finals["mujoco"], finals["pybullet"], atol=2e-3)
+
+
+def test_contact_friction_is_bullets_product():
+    world_ = pytest.importorskip("armreach_mujoco.world")
+    robot = RobotModel(Path(__file__).parents[1] / "assets" / "ar6" / "ar6.urdf", ee_link="tool0", home=AR6_HOME)
+    backend = mjb.MuJoCoBackend(robot, PhysicsConfig())
+    backend.add_box("cube", (0.02, 0.02, 0.02), 0.1, friction=0.8)
+    backend.set_friction("wrist_3_link", 1.2)
+    model = backend.model
+    seen = set()
+    for pair in range(model.npair):
+        names = {model.geom(model.pair_geom1[pair]).name, model.geom(model.pair_geom2[pair]).name}
+        bodies = {
+            model.body(model.geom_bodyid[model.pair_geom1[pair]]).name,
+            model.body(model.geom_bodyid[model.pair_geom2[pair]]).name,
+        }
+        ground = world_.GROUND in names
+        cube = world_.BODY_PREFIX + "cube" in names
+        link = 1.2 if "wrist_3_link" in bodies else world_.DEFAULT_FRICTION
+        expected = (
+            0.8 * world_.DEFAULT_FRICTION
+            if ground and cube
+            else (link * world_.DEFAULT_FRICTION if ground else 0.8 * link)
+        )
+        assert model.pair_friction[pair, 0] == pytest.approx(expected), (names, bodies)
+        seen.add((ground, cube))
+    assert seen == {(True, False), (False, True), (True, True)}
+    # links fixed to the world get no ground pair (as MuJoCo's and Bullet's own filters)
+    for pair in range(model.npair):
+        geoms = (model.pair_geom1[pair], model.pair_geom2[pair])
+        names = [model.geom(g).name for g in geoms]
+        if world_.GROUND in names and world_.BODY_PREFIX + "cube" not in names:
+            arm_geom = geoms[1 - names.index(world_.GROUND)]
+            assert model.body(model.geom_bodyid[arm_geom]).name not in robot.fixed_links
+    backend.close()
+
+
+def test_links_in_contact_agree_with_pybullet():
+    pytest.importorskip("pybullet")
+    touching = {}
+    for name in ("pybullet", "mujoco"):
+        env = ArmEnv("reach", backend=name)
+        env.reset(seed=0)
+        assert env.backend.links_in_contact() == ()  # home is clear of the ground; the base is not counted
+        rng = np.random.default_rng(0)
+        for step in range(200):
+            env.step(np.clip(rng.normal(0.3, 0.5, env.robot.dof), -1, 1))
+            links = env.backend.links_in_contact()
+            if links:
+                touching[name] = (step, links)
+                break
+        env.close()
+    assert touching["pybullet"] == touching["mujoco"] and touching["mujoco"][1]
 
 
 def test_scripted_reach_succeeds():

@@ -75,6 +75,7 @@ def _corpus(args: argparse.Namespace) -> int:
             "fk_max_m": payload["kinematic"],
             "dynamic": payload["dynamic"],
             "first_contact": payload["first_contact"],
+            "jerk": payload["jerk"],
             "steps_per_second": payload["steps_per_second"],
             "failures": report.failures(),
         }
@@ -83,21 +84,27 @@ def _corpus(args: argparse.Namespace) -> int:
         f"Command: `armreach parity --corpus --steps {args.steps} --seed {args.seed}`",
         "",
         "End-effector (EE) and joint RMS gaps to the reference backend, split at the first contact of a moving "
-        "link on either backend (the step, per backend, in the contact column).",
+        "link on either backend (the step, per backend, in the contact column); jerk ratio: the backend's mean "
+        "jerk over the reference's.",
         "",
-        "| arm | backend | sequence | free EE RMS | free joint RMS | contact EE RMS | first contact | verdict |",
-        "|---|---|---|---|---|---|---|---|",
+        "| arm | backend | sequence | free EE RMS | free joint RMS | contact EE RMS | first contact | jerk ratio | "
+        "verdict |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for name, row in rows.items():
-        verdict = "pass" if not row["failures"] else "fail"
         for backend, sequences in row["dynamic"].items():
             for sequence, gap in sequences.items():
+                failed = any(f.startswith(f"{backend} {sequence}") for f in row["failures"])
+                verdict = "fail" if failed else "pass"
                 firsts = " / ".join(
                     "-" if hit["step"] is None else str(hit["step"]) for hit in row["first_contact"][sequence].values()
                 )
+                jerks = row["jerk"][sequence]
+                ratio = jerks[backend] / max(next(iter(jerks.values())), 1e-12)
                 lines.append(
                     f"| {name} | {backend} | {sequence} | {_mm(gap['free_ee_rms_m'])} | "
-                    f"{_rad(gap['free_joint_rms_rad'])} | {_mm(gap['contact_ee_rms_m'])} | {firsts} | {verdict} |"
+                    f"{_rad(gap['free_joint_rms_rad'])} | {_mm(gap['contact_ee_rms_m'])} | {firsts} | "
+                    f"{ratio:.2f} | {verdict} |"
                 )
     out.mkdir(parents=True, exist_ok=True)
     (out / "corpus.md").write_text("\n".join(lines) + "\n")
