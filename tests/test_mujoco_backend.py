@@ -500,3 +500,23 @@ def test_unreadable_mesh_is_a_urdf_error_naming_the_file(tmp_path, mesh_cache, e
         ArmReach6DOFEnv(backend="mujoco", urdf=urdf, ee_link="tool0")
     assert "convert it to .stl or .obj" in str(caught.value)
     assert not list(mesh_cache.glob(f"{stem}-*"))  # nothing half-written is left to be reused
+
+
+def test_motor_step_gathers_the_same_as_it_views(monkeypatch):
+    """Motors.step reads joint states through views when the motor joints are contiguous, by
+    gathering otherwise: both give the same physics, bit for bit."""
+    servo = pytest.importorskip("armreach_mujoco.servo")
+
+    def run() -> np.ndarray:
+        env = ArmEnv("reach", backend="mujoco")
+        env.reset(seed=0)
+        rng = np.random.default_rng(0)
+        for _ in range(30):
+            env.step(rng.uniform(-1, 1, env.robot.dof))
+        q = env.backend.read_state().q
+        env.close()
+        return q
+
+    viewed = run()
+    monkeypatch.setattr(servo, "_view", lambda array, index: (index,))
+    np.testing.assert_array_equal(run(), viewed)

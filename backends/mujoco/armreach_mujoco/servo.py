@@ -157,15 +157,32 @@ class Motors:
 
     def step(self, model: Any, data: Any, nstep: int) -> None:
         """``nstep`` physics steps, the motors solved in each."""
-        qpos_i, qvel_i, n = self.qpos, self.qvel, len(self.qvel)
+        n = len(self.qvel)
         dt = float(model.opt.timestep)
-        rate = self.gains / dt
-        qpos, qvel = data.qpos, data.qvel
+        # the reference (v* - v) / dt = offset - stiffness * q - v / dt, on views of MjData where
+        # the motor joints are contiguous (the usual case: ~2 µs less per physics step)
+        stiffness = self.gains / (dt * dt)
+        offset = stiffness * self.targets
+        inv_dt = 1.0 / dt
+        qpos, qvel = _view(data.qpos, self.qpos), _view(data.qvel, self.qvel)
+        aref = np.empty(n)
         for _ in range(nstep):
             mujoco.mj_step1(model, data)
+            q = qpos if isinstance(qpos, np.ndarray) else data.qpos[qpos[0]]
+            v = qvel if isinstance(qvel, np.ndarray) else data.qvel[qvel[0]]
+            np.multiply(q, stiffness, out=aref)
+            np.subtract(offset, aref, out=aref)
+            aref -= v * inv_dt
             first = data.ne + data.nf - n
-            data.efc_aref[first : first + n] = (rate * (self.targets - qpos[qpos_i]) - qvel[qvel_i]) / dt
+            data.efc_aref[first : first + n] = aref
             mujoco.mj_step2(model, data)
+
+
+def _view(array: npt.NDArray[np.float64], index: npt.NDArray[np.intp]) -> Any:
+    """``array[index]`` as a view when ``index`` is a contiguous range, else ``(index,)`` to gather."""
+    if len(index) and np.array_equal(index, np.arange(index[0], index[0] + len(index))):
+        return array[int(index[0]) : int(index[0]) + len(index)]
+    return (index,)
 
 
 __all__ = ["MOTOR_PREFIX", "POSITION_GAIN", "Motors", "add_servos", "cap_damping", "follows", "servoed_held"]
