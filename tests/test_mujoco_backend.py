@@ -33,7 +33,7 @@ AR6_HOME = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
 #: ar6's random sequence reaches the ground at step 137, and contact is where they part.
 DYNAMIC_BOUNDS = {
     # (arm, sequence): (joint RMS rad, EE RMS m)
-    ("ar6", "random"): (0.012, 0.006),  # measured 0.0066 rad, 3.7 mm (0.25 mm before the contact)
+    ("ar6", "random"): (0.012, 0.006),  # measured 0.0066 rad, 3.7 mm (0.26 mm before the contact)
     ("ar6", "scripted"): (0.001, 0.0001),  # measured 0.0002 rad, 0.004 mm (free space 0.001 mm)
     ("xarm6", "random"): (0.001, 0.0005),  # measured 0.0002 rad, 0.16 mm
     ("xarm6", "scripted"): (0.001, 0.0005),  # measured 0.0002 rad, 0.09 mm
@@ -108,7 +108,7 @@ def test_position_control_tracks_pybullet(xarm_urdf, arm, sequence):
 #: Contact phases of ar6, seed 0 (the parity report's sequences): measured, in the comments.
 CONTACT_BOUNDS = {
     # sequence: (first contact step on both engines, contact-phase EE RMS bound m)
-    "biased": (27, 0.012),  # 6.7 mm (before the motor of PyBullet's kind: 124 mm)
+    "biased": (27, 0.012),  # 9.1 mm (before the motor of PyBullet's kind: 124 mm)
     "press": (12, 0.006),  # 2.4 mm
 }
 
