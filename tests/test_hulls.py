@@ -16,7 +16,7 @@ from lxml import etree
 
 from armreach_core.corpus import corpus_arm
 from armreach_core.env import ArmEnv
-from armreach_core.hulls import convex_hull, simulation_urdf
+from armreach_core.hulls import HULL_TOLERANCE, convex_hull, simplified, simulation_urdf
 from armreach_core.robot import RobotModel
 from tests.conftest import BACKENDS
 
@@ -30,7 +30,7 @@ def _arm(name: str) -> str:
     return str(arm.path)
 
 
-def test_hull_of_a_mesh_contains_it_and_is_made_of_its_vertices(tmp_path, monkeypatch):
+def test_hull_of_a_mesh_is_within_the_tolerance_of_its_convex_hull(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     robot = RobotModel(_arm("so101"))
     root = etree.fromstring(robot.parsed.resolved_xml)
@@ -38,14 +38,24 @@ def test_hull_of_a_mesh_contains_it_and_is_made_of_its_vertices(tmp_path, monkey
     hull_file = convex_hull(mesh_file)
     assert hull_file != mesh_file and hull_file.parent == tmp_path / "armreach" / "hulls"
     original, hull = trimesh.load(str(mesh_file), force="mesh"), trimesh.load(str(hull_file), force="mesh")
-    assert len(hull.vertices) < len(original.vertices)
+    full = original.convex_hull
     assert hull.is_watertight
     assert hull.volume == pytest.approx(hull.convex_hull.volume, rel=1e-6)  # convex, as written to the file
-    assert hull.volume == pytest.approx(original.convex_hull.volume, rel=1e-6)  # and the original's hull
-    # every hull vertex is one of the original's (up to the file's decimal precision)
+    # simplified: fewer vertices than the full hull, every one of them a vertex of the mesh, and
+    # no point of the mesh more than the tolerance outside it
+    assert len(hull.vertices) < len(full.vertices) / 4
     distances, _ = original.kdtree.query(hull.vertices)
     assert distances.max() < 1e-6
+    outside = -trimesh.proximity.signed_distance(hull, original.vertices)
+    assert outside.max() <= HULL_TOLERANCE + 1e-6
+    assert hull.volume <= full.volume and hull.volume > 0.9 * full.volume
     assert convex_hull(mesh_file) == hull_file  # cached: the same file again
+
+
+def test_a_small_hull_is_kept_whole():
+    box = trimesh.creation.box((0.1, 0.2, 0.3))
+    assert simplified(box.convex_hull, HULL_TOLERANCE) is not None
+    assert len(simplified(box.convex_hull, HULL_TOLERANCE).vertices) == 8
 
 
 def test_unreadable_collision_mesh_is_kept_as_it_is(tmp_path, monkeypatch):
