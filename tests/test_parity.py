@@ -225,6 +225,9 @@ def test_parity_command_writes_report_json_and_plot(tmp_path, capsys, xarm_urdf,
     for sequence, gap in payload["dynamic"]["mujoco"].items():
         runs = payload["trajectories"][sequence]
         assert np.asarray(runs["mujoco"]["q"]).shape == (60, 6)
+        assert np.asarray(runs["mujoco"]["action"]).shape == (60, 6)
+        if sequence in OPEN_LOOP:  # the same seeded actions on both engines
+            assert runs["mujoco"]["action"] == runs["pybullet"]["action"]
         assert np.all(np.isfinite(runs["mujoco"]["q"])) and np.all(np.isfinite(runs["pybullet"]["ee"]))
         # the summary numbers are the trajectories' numbers, and the engines did move
         assert gap["ee_rms_m"] == pytest.approx(_rms_gap(runs, "pybullet", "mujoco", "ee"), rel=1e-9)

@@ -291,6 +291,7 @@ class ParityReport:
                         "q": run.q.tolist(),
                         "ee": run.ee.tolist(),
                         "reward": run.reward.tolist(),
+                        "action": run.actions.tolist(),
                         "contact": run.contact.tolist(),
                     }
                     for name, run in runs.items()
