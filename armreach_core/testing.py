@@ -151,6 +151,28 @@ class BackendContract:
         assert np.linalg.norm(body.linear_velocity) < 0.01
         assert world.read_state().objects["contract-box"].position[2] == pytest.approx(body.position[2])
 
+    def test_links_in_contact_name_the_links_in_the_ground(self, world: Backend, robot: RobotModel) -> None:
+        from armreach_core.home import ground_violations
+
+        world.reset_joints(robot.home)
+        world.step()
+        try:
+            assert world.links_in_contact() == ()  # home is clear of the ground; the base is not counted
+        except NotImplementedError:
+            pytest.skip(f"backend {self.backend!r} has no contact queries")
+        rng = np.random.default_rng(0)
+        deep = next(
+            (q, low)
+            for q in robot.sample_configurations(rng, 500)
+            for low in [ground_violations(robot, q, clearance=-0.02)]
+            if low
+        )
+        world.reset_joints(deep[0])
+        world.step()
+        touching = set(world.links_in_contact())
+        assert touching & set(deep[1])  # a link put 2 cm into the ground, still touching after a step
+        assert touching <= set(robot.link_names) - robot.fixed_links
+
     @pytest.mark.parametrize("change", ["mass", "damping", "friction", "gain", "effort"])
     def test_a_dynamics_change_takes_effect_in_this_world_only(
         self, engine: type[Backend], robot: RobotModel, change: str
