@@ -280,7 +280,13 @@ def inspect_robot(
         report.parity = {
             "fk_max_m": {name: kin.max_m for name, kin in parity.kinematic.items()},
             "gaps": {
-                f"{sequence} {name}": {"ee_rms_mm": gap.ee_rms_m * 1e3, "joint_rms_rad": gap.joint_rms_rad}
+                f"{sequence} {name}": {
+                    "ee_rms_mm": gap.ee_rms_m * 1e3,
+                    "joint_rms_rad": gap.joint_rms_rad,
+                    "free_ee_rms_mm": None if gap.free_ee_rms_m is None else gap.free_ee_rms_m * 1e3,
+                    "contact_ee_rms_mm": None if gap.contact_ee_rms_m is None else gap.contact_ee_rms_m * 1e3,
+                    "contact_step": gap.contact_step,
+                }
                 for sequence in parity.trajectories
                 for name in parity.backends[1:]
                 for gap in [parity.gap(sequence, name)]
@@ -330,9 +336,13 @@ def markdown(report: RobotReport) -> str:
             )
         lines.append("")
     if report.parity:
-        lines += ["Parity (end-effector RMS gap, joint RMS gap):", ""]
+        lines += ["Parity (end-effector RMS gap in free space, and from the first contact on):", ""]
         for key, gap in report.parity["gaps"].items():
-            lines.append(f"- {key}: {gap['ee_rms_mm']:.1f} mm, {gap['joint_rms_rad']:.3f} rad")
+            free = "-" if gap["free_ee_rms_mm"] is None else f"{gap['free_ee_rms_mm']:.2f} mm"
+            text = f"- {key}: {free} in free space"
+            if gap["contact_step"] is not None:
+                text += f"; {gap['contact_ee_rms_mm']:.1f} mm from step {gap['contact_step']}"
+            lines.append(text)
         lines.append("")
     if report.warnings:
         lines += ["Warnings:", ""] + [f"- {w}" for w in report.warnings] + [""]
