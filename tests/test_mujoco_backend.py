@@ -518,5 +518,5 @@ def test_motor_step_gathers_the_same_as_it_views(monkeypatch):
         return q
 
     viewed = run()
-    monkeypatch.setattr(servo, "_view", lambda array, index: (index,))
+    monkeypatch.setattr(servo, "_contiguous", lambda index: index)
     np.testing.assert_array_equal(run(), viewed)

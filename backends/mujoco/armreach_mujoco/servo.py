@@ -164,12 +164,14 @@ class Motors:
         stiffness = self.gains / (dt * dt)
         offset = stiffness * self.targets
         inv_dt = 1.0 / dt
-        qpos, qvel = _view(data.qpos, self.qpos), _view(data.qvel, self.qvel)
+        qpos_at, qvel_at = _contiguous(self.qpos), _contiguous(self.qvel)
+        views = isinstance(qpos_at, slice) and isinstance(qvel_at, slice)
+        q, v = data.qpos[qpos_at], data.qvel[qvel_at]  # views of MjData when slices
         aref = np.empty(n)
         for _ in range(nstep):
             mujoco.mj_step1(model, data)
-            q = qpos if isinstance(qpos, np.ndarray) else data.qpos[qpos[0]]
-            v = qvel if isinstance(qvel, np.ndarray) else data.qvel[qvel[0]]
+            if not views:
+                q, v = data.qpos[qpos_at], data.qvel[qvel_at]
             np.multiply(q, stiffness, out=aref)
             np.subtract(offset, aref, out=aref)
             aref -= v * inv_dt
@@ -178,11 +180,11 @@ class Motors:
             mujoco.mj_step2(model, data)
 
 
-def _view(array: npt.NDArray[np.float64], index: npt.NDArray[np.intp]) -> Any:
-    """``array[index]`` as a view when ``index`` is a contiguous range, else ``(index,)`` to gather."""
+def _contiguous(index: npt.NDArray[np.intp]) -> slice | npt.NDArray[np.intp]:
+    """``index`` as a slice when it is a contiguous range (indexing then gives a view), else itself."""
     if len(index) and np.array_equal(index, np.arange(index[0], index[0] + len(index))):
-        return array[int(index[0]) : int(index[0]) + len(index)]
-    return (index,)
+        return slice(int(index[0]), int(index[0]) + len(index))
+    return index
 
 
 __all__ = ["MOTOR_PREFIX", "POSITION_GAIN", "Motors", "add_servos", "cap_damping", "follows", "servoed_held"]
