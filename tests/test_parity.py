@@ -262,3 +262,18 @@ def test_parity_command_writes_report_json_and_plot(tmp_path, capsys, xarm_urdf,
 def test_parity_command_needs_two_backends(tmp_path, capsys):
     assert main(["parity", "--backends", "pybullet", "--out", str(tmp_path / "p")]) == 2
     assert "two or more distinct backends" in capsys.readouterr().err
+
+
+def test_a_backend_without_contact_queries_runs_as_free_space(monkeypatch):
+    from armreach_core.env import ArmEnv
+    from armreach_core.tools.parity import drive
+
+    env = ArmEnv("reach", backend=BACKENDS[0])
+
+    def unsupported() -> tuple[str, ...]:
+        raise NotImplementedError("no contact queries")
+
+    monkeypatch.setattr(env.backend, "links_in_contact", unsupported)
+    run = drive(env, "biased", steps=40, seed=0)  # ar6's biased run touches the ground at step 27
+    env.close()
+    assert not run.contact_known and not run.contact.any() and run.first_contact is None

@@ -114,6 +114,7 @@ class Trajectory:
     actions: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))  # (steps, dof)
     contact: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))  # (steps,)
     first_contact_links: tuple[str, ...] = ()  # the links touching at the first contact
+    contact_known: bool = True  # False: the backend cannot say (no contact queries)
 
     @property
     def first_contact(self) -> int | None:
@@ -275,7 +276,11 @@ class ParityReport:
             },
             "first_contact": {
                 sequence: {
-                    name: {"step": run.first_contact, "links": list(run.first_contact_links)}
+                    name: {
+                        "step": run.first_contact,
+                        "links": list(run.first_contact_links),
+                        "known": run.contact_known,
+                    }
                     for name, run in runs.items()
                 }
                 for sequence, runs in self.trajectories.items()
@@ -336,6 +341,7 @@ def drive(env: ArmEnv, sequence: str, steps: int, seed: int) -> Trajectory:
     actions = np.empty((steps, robot.dof))
     contact = np.zeros(steps, dtype=bool)
     first_links: tuple[str, ...] = ()
+    known = True
     state = backend.read_state()
     seconds = 0.0
     for i in range(steps):
@@ -352,10 +358,14 @@ def drive(env: ArmEnv, sequence: str, steps: int, seed: int) -> Trajectory:
         seconds += time.perf_counter() - start
         state = backend.read_state()
         q_log[i], ee_log[i], rewards[i] = state.q, state.ee_pos, float(reward)
-        links = backend.links_in_contact()
-        contact[i] = bool(links)
-        if links and not first_links:
-            first_links = links
+        if known:
+            try:
+                links = backend.links_in_contact()
+            except NotImplementedError:  # a backend without contact queries: the whole run counts as free
+                known, links = False, ()
+            contact[i] = bool(links)
+            if links and not first_links:
+                first_links = links
     return Trajectory(
         q=q_log,
         ee=ee_log,
@@ -364,6 +374,7 @@ def drive(env: ArmEnv, sequence: str, steps: int, seed: int) -> Trajectory:
         actions=actions,
         contact=contact,
         first_contact_links=first_links,
+        contact_known=known,
     )
 
 
@@ -437,6 +448,12 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
     return lines
 
 
+def _first(run: Trajectory) -> str:
+    if not run.contact_known:
+        return "?"
+    return "-" if run.first_contact is None else str(run.first_contact)
+
+
 def markdown(report: ParityReport) -> str:
     """The report as Markdown: setup, one table per measurement, and a verdict line."""
     tol = report.tolerances
@@ -475,9 +492,7 @@ def markdown(report: ParityReport) -> str:
     for name in report.backends[1:]:
         for sequence, runs in report.trajectories.items():
             gap = report.gap(sequence, name)
-            firsts = ", ".join(
-                f"{backend} {'-' if run.first_contact is None else run.first_contact}" for backend, run in runs.items()
-            )
+            firsts = ", ".join(f"{backend} {_first(run)}" for backend, run in runs.items())
             rows.append(
                 [
                     name,
