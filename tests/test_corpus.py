@@ -253,3 +253,35 @@ def test_engines_agree_in_free_space(arm: CorpusArm) -> None:
     finally:
         for env in envs.values():
             env.close()
+
+
+#: Arms whose contact phases meet ``armreach parity``'s tolerances (docs/parity.md); the others
+#: still part in sliding contact and are reported, not held.
+CONTACT_PARITY = ("ur3", "ur5", "ur10", "so100", "xarm6", "xarm7")
+
+
+@pytest.mark.skipif(not {"pybullet", "mujoco"} <= set(BACKENDS), reason="needs the PyBullet and MuJoCo backends")
+@pytest.mark.parametrize("arm", _arms(CONTACT_PARITY))
+def test_engines_agree_in_contact(arm: CorpusArm) -> None:
+    """Actions biased into the ground and an IK press onto it: both engines touch the ground at
+    most 8 steps apart (measured: 0-2, xArm7's biased run 7) and move the same while in contact."""
+    from armreach_core.env import ArmEnv
+    from armreach_core.tools.parity import Gap, Tolerances, drive
+
+    tol = Tolerances()
+    envs = {name: ArmEnv("reach", backend=name, urdf=_path(arm)) for name in ("pybullet", "mujoco")}
+    try:
+        for sequence in ("biased", "press"):
+            runs = {name: drive(env, sequence, steps=200, seed=0) for name, env in envs.items()}
+            gap = Gap.between(runs["pybullet"], runs["mujoco"])
+            if gap.contact_step is None:
+                continue  # this arm's biased run stays clear of the ground
+            firsts = [run.first_contact for run in runs.values()]
+            assert None not in firsts and abs(firsts[0] - firsts[1]) <= 8, f"{arm.name} {sequence}: {firsts}"
+            bound = tol.ee_rms_m(sequence, "contact")
+            assert gap.contact_ee_rms_m is not None and gap.contact_ee_rms_m <= bound, (
+                f"{arm.name} {sequence}: {gap.contact_ee_rms_m * 1e3:.1f} mm"
+            )
+    finally:
+        for env in envs.values():
+            env.close()
