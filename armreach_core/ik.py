@@ -45,6 +45,9 @@ def solve(
 #: Random restarts of the IK reference's solve (``IKPolicy(restarts=RESTARTS)``): what every
 #: caller that wants the reference's behaviour passes.
 RESTARTS = 16
+#: Further random restarts, as many times ``restarts`` again, spent only while no solution that
+#: ``accept`` takes has been found (a low target most solutions reach with a link in the ground).
+PERSISTENCE = 15
 
 
 def solve_with_restarts(
@@ -60,13 +63,19 @@ def solve_with_restarts(
 
     Returns the first solution within ``tolerance`` that ``accept`` takes (so the nearest
     start that works wins), else the first within ``tolerance``, else the best one found.
-    The random starts are seeded: the result is deterministic.
+    When solutions were found but ``accept`` took none, the search goes on for up to
+    :data:`PERSISTENCE` times ``restarts`` further random starts, stopping at the first one
+    it takes. The random
+    starts are seeded: the result is deterministic.
     """
     rng = np.random.default_rng(seed)
     starts = [np.asarray(q0, dtype=np.float64), robot.home]
     best_q, best_d = robot.home, float("inf")
     fallback: FloatArray | None = None  # within tolerance, but not accepted
-    for i in range(restarts + 2):
+    tries = restarts + 2 + (PERSISTENCE * restarts if accept is not None else 0)
+    for i in range(tries):
+        if i == restarts + 2 and fallback is None:
+            break  # no solution at all: more starts are for targets reached only in ways not accepted
         start = starts[i] if i < len(starts) else robot.sample_configurations(rng, 1)[0]
         if i >= len(starts):
             start[robot.arm_dof :] = robot.home[robot.arm_dof :]  # off-arm joints keep their home

@@ -69,3 +69,40 @@ def test_ik_with_restarts_reaches_the_reachable_targets(arm):
     assert len(points) > 0
     reached = [solve_with_restarts(robot, target, robot.home)[1] < 1e-3 for target in targets]
     assert np.mean(reached) >= 0.99, f"{arm.name}: {np.mean(reached):.0%}"
+
+
+@pytest.mark.parametrize("arm", CORPUS, ids=[a.name for a in CORPUS])
+def test_ik_reference_plans_every_task_target_with_every_link_above_the_ground(arm):
+    """Low targets most solutions reach with a link in the ground (UR5 with gripper, Z1): the search goes on
+    past its restarts until it finds one clear of the ground."""
+    from armreach_core.reach import ReachTask
+
+    robot = _load(arm)
+    task = ReachTask(robot)
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        target = task.sampler.sample(rng)
+        q, distance = solve_with_restarts(robot, target, robot.home, accept=lambda q: not ground_violations(robot, q))
+        # (a target on the rim of the reachable set may be reached only to a few mm: success is 5 cm)
+        assert distance < 0.01, f"{arm.name}: target {target.round(3)} missed by {distance:.4f} m"
+        assert ground_violations(robot, q) == {}, f"{arm.name}: target {target.round(3)} reached in the ground"
+
+
+def test_ik_search_goes_on_past_its_restarts_only_while_nothing_is_accepted(ar6_urdf):
+    robot = RobotModel(ar6_urdf)
+    target = robot.forward_kinematics(robot.home + 0.3)
+    calls = []
+
+    def picky(q):
+        calls.append(q)
+        return len(calls) > 40  # refuses the first 40 solutions
+
+    _, distance = solve_with_restarts(robot, target, robot.home, restarts=16, accept=picky)
+    assert distance < 1e-4 and len(calls) == 41
+    calls.clear()
+    solve_with_restarts(robot, target, robot.home, restarts=16, accept=lambda q: calls.append(q) is None)
+    assert len(calls) == 1
+    unreachable = np.array([5.0, 5.0, 5.0])
+    calls.clear()
+    _, distance = solve_with_restarts(robot, unreachable, robot.home, restarts=16, accept=picky)
+    assert distance > 1.0 and calls == []  # no solution at all: no search beyond the restarts
