@@ -62,8 +62,11 @@ class ReachTask(Task):
             (the bundled arm: 0.5, the paper's), else ``TARGET_RADIUS_FRACTION`` (0.5) of the arm's
             reach ``R``, so that a small arm's task is the same task as a large arm's, scaled.
         target_center: centre of the ball (m, world frame); default from the robot's
-            registration, else ``(0.5 R, 0, 0.5 R)`` from the base (or, for an
-            arm that reaches no point of that ball, the reachable point nearest to it).
+            registration, else half the reach ``R`` up and half forward from the base (or, for an
+            arm that reaches no point of that ball, the reachable point nearest to it). Forward is
+            +x for an arm that reaches all round its base, else the direction its reachable set
+            leans to (a base joint of limited range: SO-100 faces -y;
+            :attr:`armreach_core.workspace.ReachabilityMap.forward`).
         min_target_height: lowest target height (m), default 0.05.
         goal_conditioned: return a Dict observation (observation / achieved_goal /
             desired_goal) for HER, default False.
@@ -98,7 +101,8 @@ class ReachTask(Task):
         if target_radius is None:
             target_radius = TARGET_RADIUS_FRACTION * reach
         if target_center is None:
-            front = np.asarray(robot.base_position) + (0.5 * reach, 0.0, 0.5 * reach)
+            facing = reachability_map(robot).forward
+            front = np.asarray(robot.base_position) + 0.5 * reach * (facing + (0.0, 0.0, 1.0))
             self.sampler = TargetSampler(robot, front, target_radius, min_target_height)
             if not self.sampler.has_targets():  # an odd arm: centre the ball on a point it reaches
                 center = self.sampler.nearest_reachable(self.sampler.center)

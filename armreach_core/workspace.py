@@ -33,6 +33,10 @@ _MAP_SEED = 20240607
 MIN_HOLDABLE = 0.05
 #: Poses checked along each straight path from home (see :func:`armreach_core.statics.holdable_paths`).
 PATH_POINTS = 9
+#: Below this mean resultant length of the reachable voxels' horizontal directions the arm reaches
+#: all round its base (a base joint of about 300 degrees or more) and faces +x; above it, its reachable
+#: set leans one way (a base joint of limited range) and the arm faces that way.
+LOPSIDED = 0.25
 
 
 class ReachabilityMap:
@@ -72,6 +76,9 @@ class ReachabilityMap:
             for shift in (-1, 1):
                 interior &= np.roll(occupied, shift, axis=axis)
         self.grid = interior
+        #: The horizontal unit vector the arm faces (see :data:`LOPSIDED`): +x for an arm that
+        #: reaches all round its base, else the mean direction of its reachable voxels from the base.
+        self.forward = _facing(self.centers(self.origin * voxel, (self.origin + shape) * voxel), robot.base_position)
 
     def centers(self, low: npt.ArrayLike, high: npt.ArrayLike) -> FloatArray:
         """Centres of the interior voxels inside the box ``[low, high]`` (m), shape (n, 3)."""
@@ -89,6 +96,18 @@ class ReachabilityMap:
         ok = idx[inside]
         result[inside] = self.grid[ok[:, 0], ok[:, 1], ok[:, 2]]
         return result
+
+
+def _facing(points: FloatArray, base: npt.ArrayLike) -> FloatArray:
+    """The horizontal direction the voxels ``points`` lean to from ``base`` (+x when they do not)."""
+    horizontal = (points - np.asarray(base, dtype=np.float64))[:, :2]
+    norms = np.linalg.norm(horizontal, axis=1)
+    away = norms > 1e-9
+    mean = (horizontal[away] / norms[away, None]).mean(axis=0) if np.any(away) else np.zeros(2)
+    length = float(np.linalg.norm(mean))
+    if length < LOPSIDED:
+        return np.array([1.0, 0.0, 0.0])
+    return np.array([mean[0] / length, mean[1] / length, 0.0])
 
 
 @functools.lru_cache(maxsize=32)

@@ -212,11 +212,40 @@ def test_target_region_scales_with_the_arm():
     urdfs = [asset_path("ar6", "ar6.urdf"), corpus_arm("ur3").path, corpus_arm("so101").path]
     for urdf in [u for u in urdfs if u is not None]:
         env = ArmReach6DOFEnv(urdf=urdf)
-        reach = reachability_map(env.robot).reach
-        assert env.task.sampler.radius == pytest.approx(TARGET_RADIUS_FRACTION * reach)
+        space = reachability_map(env.robot)
+        assert env.task.sampler.radius == pytest.approx(TARGET_RADIUS_FRACTION * space.reach)
         base = np.asarray(env.robot.base_position)
-        np.testing.assert_allclose(env.task.sampler.center, base + (0.5 * reach, 0.0, 0.5 * reach))
+        expected = base + 0.5 * space.reach * (space.forward + (0.0, 0.0, 1.0))
+        np.testing.assert_allclose(env.task.sampler.center, expected)
         env.close()
+
+
+def _yawed(angle: float) -> tuple[float, float, float, float]:
+    return (float(np.cos(angle / 2)), 0.0, 0.0, float(np.sin(angle / 2)))
+
+
+def test_target_region_faces_where_a_limited_base_joint_points():
+    """An arm reaching all round its base faces +x, however its base is turned; SO-100, whose base joint
+    turns +-2 rad about the direction -y it points at zero, faces -y, and turns with its base."""
+    from armreach_core.corpus import corpus_arm
+    from armreach_core.workspace import reachability_map
+
+    so100, ur3 = corpus_arm("so100").path, corpus_arm("ur3").path
+    if so100 is None or ur3 is None:
+        pytest.skip("example-robot-data is not installed")
+    for yaw in (0.0, np.pi / 2):
+        env = ArmReach6DOFEnv(urdf=ur3, base_orientation=_yawed(yaw))
+        np.testing.assert_allclose(reachability_map(env.robot).forward, (1.0, 0.0, 0.0))
+        env.close()
+    facing = []
+    for yaw in (0.0, np.pi / 2):
+        env = ArmReach6DOFEnv(urdf=so100, base_orientation=_yawed(yaw))
+        facing.append(reachability_map(env.robot).forward)
+        centre = env.task.sampler.center - np.asarray(env.robot.base_position)
+        assert np.dot(centre[:2], facing[-1][:2]) == pytest.approx(np.linalg.norm(centre[:2]))
+        env.close()
+    np.testing.assert_allclose(facing[0], (0.0, -1.0, 0.0), atol=0.02)
+    np.testing.assert_allclose(facing[1], (1.0, 0.0, 0.0), atol=0.02)
 
 
 def test_same_seed_and_actions_give_identical_trajectories(backend):
