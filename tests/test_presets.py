@@ -108,6 +108,10 @@ def test_paper_models_are_built_with_those_settings(tmp_path: Path) -> None:
         ("reach: {ppo: {learning_rate: .inf}}\n", r"must be finite"),
         ("reach: !!python/object/apply:os.system ['echo hi']\n", r"not valid YAML"),
         ("reach: {ppo: [\n", r"not valid YAML"),
+        (
+            "grasp:\n  sac:\n    env: {rewrd_type: dense}\n",
+            r"env\.rewrd_type: unknown key; allowed here: .*max_episode_steps.*or a task's option \(.*reward_type",
+        ),
     ],
 )
 def test_bad_presets_name_the_problem(text: str, match: str) -> None:
@@ -135,3 +139,19 @@ def test_a_preset_file_works_like_a_bundled_one(tmp_path: Path) -> None:
     assert config.settings["gamma"] == 0.9
     assert config.settings["her"]["goal_selection_strategy"] == "future"
     assert config.seed == 4
+
+
+def test_a_task_option_in_the_env_section_reaches_the_task(tmp_path: Path) -> None:
+    """A registered task's own option (grasp's reward_type) is a valid env key, passed to the task."""
+    pytest.importorskip("armreach_grasp")
+    from armreach_core.env import ArmEnv
+
+    preset = parse_preset("grasp:\n  sac:\n    env: {reward_type: dense, max_episode_steps: 50}\n", "mine")
+    env_settings = preset.get("grasp", "sac")["env"]
+    assert env_settings == {"reward_type": "dense", "max_episode_steps": 50}
+    env = ArmEnv("grasp", **env_settings)
+    assert env.task.reward_type == "dense"  # type: ignore[attr-defined]
+    env.close()
+    bad = parse_preset("grasp:\n  sac:\n    env: {reward_type: shaped}\n", "bad").get("grasp", "sac")["env"]
+    with pytest.raises(ConfigError, match=r"reward_type='shaped'; use one of"):
+        ArmEnv("grasp", **bad)

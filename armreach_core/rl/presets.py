@@ -121,6 +121,43 @@ ENV_SCHEMA: dict[str, Check] = {
     # a perturbation drawn per training episode (domain randomization)
     "randomize": _randomize,
 }
+
+
+def _task_options() -> dict[str, list[str]]:
+    """Keyword options of every registered task's constructor: option -> the tasks that take it."""
+    import inspect
+
+    from armreach_core.loading import task_spec
+    from armreach_core.plugins import available_tasks
+
+    options: dict[str, list[str]] = {}
+    for name in available_tasks():
+        for parameter in list(inspect.signature(task_spec(name).load()).parameters.values())[1:]:
+            if parameter.kind is parameter.KEYWORD_ONLY or parameter.kind is parameter.POSITIONAL_OR_KEYWORD:
+                options.setdefault(parameter.name, []).append(name)
+    return options
+
+
+def _env_section(key: str, value: Any) -> dict[str, Any]:
+    """The env section: :data:`ENV_SCHEMA`'s keys, checked here, and any registered task's own options
+    (``reward_type`` of grasp...), passed to the task, which checks their values when the env is built."""
+    if not isinstance(value, dict):
+        return _validate(value, ENV_SCHEMA, key)
+    own = {k: v for k, v in value.items() if k in ENV_SCHEMA}
+    out = _validate(own, ENV_SCHEMA, key)
+    others = [k for k in value if k not in ENV_SCHEMA]
+    if others:
+        options = _task_options()
+        for name in others:
+            if name not in options:
+                raise ConfigError(
+                    f"{key}.{name}: unknown key; allowed here: {', '.join(sorted(ENV_SCHEMA))}, "
+                    f"or a task's option ({', '.join(sorted(options))})"
+                )
+            out[name] = value[name]
+    return out
+
+
 POLICY_SCHEMA: dict[str, Check] = {"net_arch": _int_list, "activation": _choice("relu", "tanh")}
 NOISE_SCHEMA: dict[str, Check] = {
     "type": _choice("normal", "ornstein-uhlenbeck", "none"),
@@ -134,7 +171,7 @@ COMMON: dict[str, Check] = {
     "timesteps": _num(int, 1),
     "n_envs": _num(int, 1, 64),
     "torch_threads": _num(int, 0, 64),
-    "env": _section(ENV_SCHEMA),
+    "env": _env_section,
     "policy": _section(POLICY_SCHEMA),
     "learning_rate": _num(float, 0.0, lo_open=True),
     "gamma": _num(float, 0.0, 1.0),
@@ -152,7 +189,7 @@ ALGO_SCHEMAS: dict[str, dict[str, Check]] = {
         "gae_lambda": _num(float, 0.0, 1.0),
         "ent_coef": _num(float, 0.0),
     },
-    "ik": {"env": _section(ENV_SCHEMA), "damping": _num(float, 0.0, lo_open=True), "timesteps": _num(int, 0)},
+    "ik": {"env": _env_section, "damping": _num(float, 0.0, lo_open=True), "timesteps": _num(int, 0)},
 }
 for _name in OFF_POLICY:
     ALGO_SCHEMAS[_name] = {
