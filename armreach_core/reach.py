@@ -27,7 +27,7 @@ from gymnasium import spaces
 from armreach_core.backend import ArmState
 from armreach_core.errors import ConfigError, URDFError
 from armreach_core.robot import FloatArray, RobotModel
-from armreach_core.task import Component, GoalArray, ObservationLayout, Scene, Task, goal_distance
+from armreach_core.task import Component, Demonstrator, GoalArray, ObservationLayout, Scene, Task, goal_distance
 from armreach_core.workspace import TargetSampler, reachability_map
 
 TARGET_MARKER = "target"
@@ -251,5 +251,25 @@ class ReachTask(Task):
         distance = goal_distance(achieved_goal, desired_goal)
         return self._distance_term(distance) + self._success_term(distance)
 
+    def demonstrator(self, env: Any) -> Demonstrator:
+        """The IK reference (:class:`armreach_core.ik.IKPolicy` with its restarts), reading the env's joints."""
+        return _IKDemonstrator(env, self)
+
     def compute_terminated(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any) -> Any:
         return self._reached(goal_distance(achieved_goal, desired_goal))
+
+
+class _IKDemonstrator:
+    """The IK reference as a :class:`~armreach_core.task.Demonstrator` of ``task`` in ``env``."""
+
+    def __init__(self, env: Any, task: ReachTask) -> None:
+        self.env, self.task = env, task
+        self.reset()
+
+    def reset(self) -> None:
+        from armreach_core.ik import RESTARTS, IKPolicy
+
+        self.policy = IKPolicy(self.task.robot, float(self.env.max_joint_step), restarts=RESTARTS)
+
+    def act(self, observation: Any) -> npt.NDArray[np.float32]:
+        return self.policy.act(self.env.backend.joint_state()[0], self.task.target)

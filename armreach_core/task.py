@@ -15,7 +15,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -117,6 +117,17 @@ class Score(NamedTuple):
     info: dict[str, Any]
 
 
+class Demonstrator(Protocol):
+    """A task's reference controller: what :meth:`Task.demonstrator` returns."""
+
+    def reset(self) -> None:
+        """Forget the last episode (called before each reset of the env)."""
+
+    def act(self, observation: Any) -> npt.NDArray[np.float32]:
+        """The action, in [-1, 1], for the env's current observation."""
+        ...
+
+
 class Task(ABC):
     """Base class of tasks. Subclasses take their options as keyword arguments.
 
@@ -186,6 +197,14 @@ class Task(ABC):
         success = bool(self.compute_terminated(achieved, desired, info))
         info["is_success"] = success
         return Score(float(self.compute_reward(achieved, desired, info)), success, info)
+
+    def demonstrator(self, env: Any) -> Demonstrator | None:
+        """A reference controller for this task in ``env`` (the unwrapped env), if the task has one.
+
+        Off-policy runs can learn beside its episodes (the preset key ``demonstrations``,
+        :mod:`armreach_core.rl.demonstrations`). Default: none.
+        """
+        return None
 
     @abstractmethod
     def compute_reward(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any) -> Any:

@@ -140,6 +140,14 @@ def build_model(
         elif noise.get("type") == "normal":
             kwargs["action_noise"] = NormalActionNoise(np.zeros(n_actions), sigma)
         her = settings.get("her")
+        demonstrations = settings.get("demonstrations")
+        if her is not None and demonstrations is not None:
+            raise ConfigError("demonstrations and HER each need their own replay buffer: drop one of them")
+        if demonstrations is not None:
+            from armreach_core.rl.demonstrations import DemoReplayBuffer
+
+            kwargs["replay_buffer_class"] = DemoReplayBuffer
+            kwargs["replay_buffer_kwargs"] = {"share": float(demonstrations.get("share", 0.5))}
         if her is not None:
             kwargs["replay_buffer_class"] = HerReplayBuffer
             kwargs["replay_buffer_kwargs"] = {

@@ -45,7 +45,12 @@ MODULES = {
 ALGORITHMS = {learner: tuple(modules) for learner, modules in MODULES.items()}
 CLASS_NAMES = {"ppo": "PPO", "ddpg": "DDPG", "td3": "TD3", "sac": "SAC", "tqc": "TQC", "crossq": "CrossQ"}
 #: Preset keys that become constructor arguments of another name.
-ARGUMENT_OF = {"noise": "action_noise", "her": "replay_buffer_class", "policy": "policy_kwargs"}
+ARGUMENT_OF = {
+    "noise": "action_noise",
+    "her": "replay_buffer_class",
+    "demonstrations": "replay_buffer_class",
+    "policy": "policy_kwargs",
+}
 #: Preset keys that are not constructor arguments at all.
 NOT_ARGUMENTS = ("timesteps", "n_envs", "torch_threads", "env", "checkpoint_every", "learner")
 #: Where a learner comes from, for the error that says what to install.

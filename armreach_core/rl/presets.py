@@ -163,6 +163,10 @@ NOISE_SCHEMA: dict[str, Check] = {
     "type": _choice("normal", "ornstein-uhlenbeck", "none"),
     "sigma": _num(float, 0.0),
 }
+DEMONSTRATIONS_SCHEMA: dict[str, Check] = {
+    "episodes": _num(int, 1),
+    "share": _num(float, 0.0, 1.0, lo_open=True),
+}
 HER_SCHEMA: dict[str, Check] = {
     "n_sampled_goal": _num(int, 1),
     "goal_selection_strategy": _choice("future", "final", "episode"),
@@ -202,6 +206,8 @@ for _name in OFF_POLICY:
         "policy_delay": _num(int, 1),
         "noise": _section(NOISE_SCHEMA),
         "her": _section(HER_SCHEMA),
+        # episodes of the task's reference controller, a share of every batch (armreach_core.rl.demonstrations)
+        "demonstrations": _section(DEMONSTRATIONS_SCHEMA),
     }
 
 

@@ -46,6 +46,8 @@ from armreach_core.rl.config import RunConfig
 CONFIG = "config.yaml"
 COMMAND = "command.txt"
 ENVIRONMENT = "environment.json"
+#: What the run's demonstration buffer holds (preset key ``demonstrations``): episodes, steps, success rate.
+DEMONSTRATIONS = "demonstrations.json"
 MONITOR = "monitor.csv"
 MODEL = "model.zip"
 CHECKPOINT = "checkpoint.zip"

@@ -95,6 +95,21 @@ def seed_base(seed: int) -> int:
     return int(np.random.SeedSequence([seed, 0xA12E]).generate_state(1)[0] >> 1)
 
 
+def _demonstrate(config: RunConfig, model: Any, run_dir: Path) -> None:
+    """Fill the model's demonstration buffer (preset key ``demonstrations``) and record what it holds."""
+    from armreach_core.env import ArmEnv
+    from armreach_core.rl.agents import env_kwargs
+    from armreach_core.rl.demonstrations import collect
+
+    episodes = int(config.settings["demonstrations"]["episodes"])
+    env = ArmEnv(**env_kwargs(config))
+    try:
+        steps, success = collect(env.unwrapped, model.replay_buffer, episodes)
+    finally:
+        env.close()
+    runs.write_json(run_dir / runs.DEMONSTRATIONS, {"episodes": episodes, "steps": steps, "success_rate": success})
+
+
 def train(
     config: RunConfig,
     run_dir: Path,
@@ -141,6 +156,8 @@ def train(
         else:
             model = build_model(config.algo, config.settings, env, config.seed, run_dir / "tb", config.device)
             env.seed(seed_base(config.seed))  # SB3 seeded the envs with the run seed itself; spread them
+            if "demonstrations" in config.settings:
+                _demonstrate(config, model, run_dir)
         # Written once the model exists, so that a folder with a config always has something to resume
         # or is safe to start over (see runs.new_run_dir).
         runs.write_config(run_dir, config)

@@ -215,6 +215,12 @@ class GraspTask(Task):
             "desired_goal": self.goal.astype(np.float32),
         }
 
+    def demonstrator(self, env: Any) -> Any:
+        """The scripted pick (:class:`armreach_grasp.scripted.ScriptedGrasp`)."""
+        from armreach_grasp.scripted import ScriptedGrasp
+
+        return ScriptedGrasp(env)
+
     # -- scoring: one path, pure and batch-friendly ---------------------------------------
     def achieved_goal(self, state: ArmState) -> GoalArray:
         return state.objects[OBJECT].position.astype(np.float32)
