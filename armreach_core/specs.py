@@ -73,6 +73,8 @@ class TaskSpec:
         entry_point: the env class, as ``"module:Class"``; it receives ``task=name``
             unless it fixes the task itself.
         description: one line for ``armreach plugins``.
+        presets: YAML presets the task ships (``--preset NAME`` finds each by its file name
+            without ``.yaml``, after armreach's own).
     """
 
     name: str
@@ -83,6 +85,7 @@ class TaskSpec:
     defaults: Mapping[str, Any] = field(default_factory=dict)
     entry_point: str = "armreach_core.env:ArmEnv"
     description: str = ""
+    presets: tuple[Path, ...] = ()
 
 
 @dataclass(frozen=True)

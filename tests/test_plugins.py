@@ -279,3 +279,35 @@ def test_the_copy_me_task_template_works(monkeypatch):
         armreach_core.unregister_plugin(entry_point[0])
         for name in [m for m in sys.modules if m.startswith("armreach_mytask")]:
             monkeypatch.delitem(sys.modules, name)
+
+
+def test_a_task_plugin_ships_presets_found_by_name(tmp_path):
+    """A preset a task plugin ships (TaskSpec.presets) is found by its name, as the grasp plugin's is;
+    armreach's own presets keep their names."""
+    from armreach_core.errors import ConfigError
+    from armreach_core.rl.presets import load_preset
+
+    mine = tmp_path / "far.yaml"
+    mine.write_text("description: far\nfar-reach:\n  sac: {timesteps: 77}\n")
+    shadow = tmp_path / "paper.yaml"
+    shadow.write_text("description: not the paper's\nreach:\n  sac: {timesteps: 1}\n")
+
+    class ShippingPlugin:
+        @hookimpl
+        def armreach_register_tasks(self, register):
+            register(
+                TaskSpec(name="far-reach", env_id="armreach/FarReach-v0", load=lambda: FarReach, presets=(mine, shadow))
+            )
+
+    with pytest.raises(ConfigError, match=r"neither a bundled preset \(.*\) nor a YAML file"):
+        load_preset("far")
+    armreach_core.register_plugin(ShippingPlugin(), name="shipping")
+    try:
+        preset = load_preset("far")
+        assert preset.get("far-reach", "sac")["timesteps"] == 77 and preset.source == "plugin:far"
+        assert load_preset("paper").source == "bundled:paper"
+    finally:
+        armreach_core.unregister_plugin("shipping")
+    if "grasp" in armreach_core.available_tasks():
+        grasp = load_preset("grasp")
+        assert grasp.default_algo == "sac" and grasp.get("grasp", "sac")["env"]["reward_type"] == "dense"

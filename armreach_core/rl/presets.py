@@ -265,6 +265,20 @@ def bundled_presets() -> list[str]:
     return sorted(p.name.removesuffix(".yaml") for p in folder.iterdir() if p.name.endswith(".yaml"))
 
 
+def plugin_presets() -> dict[str, Path]:
+    """Presets the registered tasks ship (``TaskSpec.presets``), by name; armreach's own names win."""
+    from armreach_core.plugins import get_host
+
+    own = set(bundled_presets())
+    found: dict[str, Path] = {}
+    for spec in get_host().registry.tasks.values():
+        for path in spec.presets:
+            name = Path(path).name.removesuffix(".yaml")
+            if name not in own:
+                found.setdefault(name, Path(path))
+    return found
+
+
 def parse_preset(text: str, name: str, source: str = "") -> Preset:
     """Validate preset YAML text."""
     try:
@@ -300,9 +314,12 @@ def load_preset(name_or_path: str | Path) -> Preset:
     if text_name in bundled_presets():
         resource = resources.files("armreach_core") / "presets" / f"{text_name}.yaml"
         return parse_preset(resource.read_text(encoding="utf-8"), text_name, f"bundled:{text_name}")
+    shipped = plugin_presets()
+    if text_name in shipped:
+        path = shipped[text_name]
+        return parse_preset(path.read_text(encoding="utf-8"), text_name, f"plugin:{text_name}")
     path = Path(name_or_path).expanduser()
     if not path.is_file():
-        raise ConfigError(
-            f"preset {text_name!r} is neither a bundled preset ({', '.join(bundled_presets())}) nor a YAML file"
-        )
+        names = ", ".join([*bundled_presets(), *sorted(shipped)])
+        raise ConfigError(f"preset {text_name!r} is neither a bundled preset ({names}) nor a YAML file")
     return parse_preset(path.read_text(encoding="utf-8"), path.stem, str(path.resolve()))

@@ -18,6 +18,12 @@ def gripper_urdf() -> Path:
     return Path(str(resources.files("armreach_grasp.assets").joinpath("ar6_gripper", "ar6_gripper.urdf")))
 
 
+def presets() -> tuple[Path, ...]:
+    """The presets the task ships: ``grasp`` (``armreach train --task grasp --preset grasp``)."""
+    folder = resources.files("armreach_grasp.presets")
+    return tuple(Path(str(folder.joinpath(name))) for name in ("grasp.yaml",))
+
+
 def _grasp_task() -> type[Task]:
     from armreach_grasp.task import GraspTask
 
@@ -35,6 +41,7 @@ def armreach_register_tasks(register: Register) -> None:
             max_episode_steps=100,
             entry_point="armreach_grasp.env:ArmGraspEnv",
             description="pick a cube from a table with a parallel gripper and lift it 10 cm",
+            presets=presets(),
         )
     )
 
