@@ -67,6 +67,23 @@ class PhysicsConfig:
         return self.timestep * self.substeps
 
 
+def stable_damping(damping: npt.ArrayLike, inertia: npt.ArrayLike, timestep: float) -> FloatArray:
+    """Joint dampings bounded by ``inertia / timestep``: the damping that stops a joint in one step.
+
+    PyBullet applies a joint's damping as a torque ``-D v`` from the velocity before the step.
+    Where ``timestep * D / M_ii > 1`` (a light joint with URDF damping: TALOS's gripper, ar6's last
+    wrist) that torque reverses the joint within a step, and once the joint's motor is at its
+    effort the joint rings with growing amplitude until a limit stops it. Every backend bounds
+    each motor joint's ``D`` by its ``M_ii / timestep`` at home, the same numbers from the same URDF.
+
+    Args:
+        damping: URDF dampings (N m s/rad or N s/m), one per joint.
+        inertia: the diagonal of the joint-space mass matrix at home, one per joint.
+        timestep: the physics step (s).
+    """
+    return np.minimum(np.asarray(damping, dtype=np.float64), np.asarray(inertia, dtype=np.float64) / timestep)
+
+
 @dataclass(frozen=True)
 class Camera:
     """An orbit camera for ``rgb_array`` rendering (angles in degrees, distances in m)."""

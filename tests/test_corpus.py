@@ -8,6 +8,7 @@ rules give, written down so that a change in them is seen.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -222,66 +223,66 @@ def test_observation_is_one_consistent_snapshot(arm: CorpusArm, backend: str) ->
         env.close()
 
 
-#: Free space: ``armreach parity``'s tolerances hold on every arm, but for xArm7's joint angles
-#: under random actions: its aligned joints 1, 3, 5 and 7 drift apart in the null space
-#: (measured 0.028 rad, the end effector 6.5 mm; docs/parity.md).
-FREE_JOINT_RMS = {"xarm7": 0.035}
+@functools.cache
+def _parity_runs(arm: CorpusArm) -> dict[str, dict[str, Any]]:
+    """Every parity sequence, 200 steps from home with seed 0, on both engines (run once per arm)."""
+    from armreach_core.env import ArmEnv
+    from armreach_core.tools.parity import SEQUENCES, drive
+
+    envs = {name: ArmEnv("reach", backend=name, urdf=_path(arm)) for name in ("pybullet", "mujoco")}
+    try:
+        return {
+            sequence: {n: drive(env, sequence, steps=200, seed=0) for n, env in envs.items()} for sequence in SEQUENCES
+        }
+    finally:
+        for env in envs.values():
+            env.close()
 
 
 @pytest.mark.skipif(not {"pybullet", "mujoco"} <= set(BACKENDS), reason="needs the PyBullet and MuJoCo backends")
 @pytest.mark.parametrize("arm", _arms())
 def test_engines_agree_in_free_space(arm: CorpusArm) -> None:
-    """Random actions and the IK reach, 200 steps from home: the same motion on both engines until
-    a moving link first touches something, and the same smoothness (jerk) throughout."""
-    from armreach_core.env import ArmEnv
-    from armreach_core.tools.parity import Gap, Tolerances, drive
+    """Every sequence, 200 steps from home: the same motion on both engines until a moving link
+    first touches something (``armreach parity``'s tolerances, on every arm), and the same
+    smoothness (jerk) throughout the sequences a policy could produce."""
+    from armreach_core.backend import PhysicsConfig
+    from armreach_core.tools.parity import JERK_SEQUENCES, Gap, Tolerances
 
-    tol = Tolerances()
-    envs = {name: ArmEnv("reach", backend=name, urdf=_path(arm)) for name in ("pybullet", "mujoco")}
-    try:
-        for sequence in ("random", "scripted"):
-            runs = {name: drive(env, sequence, steps=200, seed=0) for name, env in envs.items()}
-            gap = Gap.between(runs["pybullet"], runs["mujoco"])
-            if gap.free_ee_rms_m is None:
-                continue  # touching from the first step: nothing to compare in free space
-            where = f"{arm.name} {sequence}"
+    tol, dt = Tolerances(), PhysicsConfig().control_dt
+    for sequence, runs in _parity_runs(arm).items():
+        gap = Gap.between(runs["pybullet"], runs["mujoco"])
+        where = f"{arm.name} {sequence}"
+        if gap.free_ee_rms_m is not None:  # None: touching from the first step
             assert gap.free_ee_rms_m <= tol.ee_rms_m(sequence), f"{where}: {gap.free_ee_rms_m * 1e3:.2f} mm"
-            joint_bound = FREE_JOINT_RMS.get(arm.name, tol.joint_rms_rad) if sequence == "random" else tol.joint_rms_rad
-            assert gap.free_joint_rms_rad is not None and gap.free_joint_rms_rad <= joint_bound, where
-            jerks = [mean_jerk(run.q, envs["pybullet"].physics.control_dt) for run in runs.values()]
+            assert gap.free_joint_rms_rad is not None and gap.free_joint_rms_rad <= tol.joint_rms_rad, where
+        if sequence in JERK_SEQUENCES:
+            jerks = [mean_jerk(run.q, dt) for run in runs.values()]
             assert max(jerks) <= tol.jerk_ratio * min(jerks), f"{where}: jerk {jerks}"
-    finally:
-        for env in envs.values():
-            env.close()
 
 
-#: Arms whose contact phases meet ``armreach parity``'s tolerances (docs/parity.md); the others
-#: still part in sliding contact and are reported, not held.
-CONTACT_PARITY = ("ur3", "ur5", "ur10", "so100", "xarm6", "xarm7")
+#: Contact phases that miss ``armreach parity``'s tolerance, held at what they measure
+#: (docs/parity.md): Z1's gripper bouncing on the ground under biased actions (26.4 mm against
+#: 25), and the KUKA's press, where its elbow meets the ground first (10.6 mm against 10).
+CONTACT_MEASURED = {("z1", "biased"): 0.030, ("kuka-iiwa", "press"): 0.012}
 
 
 @pytest.mark.skipif(not {"pybullet", "mujoco"} <= set(BACKENDS), reason="needs the PyBullet and MuJoCo backends")
-@pytest.mark.parametrize("arm", _arms(CONTACT_PARITY))
+@pytest.mark.parametrize("arm", _arms())
 def test_engines_agree_in_contact(arm: CorpusArm) -> None:
-    """Actions biased into the ground and an IK press onto it: both engines touch the ground at
-    most 8 steps apart (measured: 0-2, xArm7's biased run 7) and move the same while in contact."""
-    from armreach_core.env import ArmEnv
-    from armreach_core.tools.parity import Gap, Tolerances, drive
+    """Random and biased actions and the IK press: wherever a moving link touches the ground, both
+    engines move the same while in contact, and where the sequence drives into the ground (biased,
+    press) they touch it at most 8 steps apart (measured: 0-2, xArm7's biased run 7)."""
+    from armreach_core.tools.parity import Gap, Tolerances
 
     tol = Tolerances()
-    envs = {name: ArmEnv("reach", backend=name, urdf=_path(arm)) for name in ("pybullet", "mujoco")}
-    try:
-        for sequence in ("biased", "press"):
-            runs = {name: drive(env, sequence, steps=200, seed=0) for name, env in envs.items()}
-            gap = Gap.between(runs["pybullet"], runs["mujoco"])
-            if gap.contact_step is None:
-                continue  # this arm's biased run stays clear of the ground
-            firsts = [run.first_contact for run in runs.values()]
+    for sequence, runs in _parity_runs(arm).items():
+        gap = Gap.between(runs["pybullet"], runs["mujoco"])
+        if gap.contact_step is None:
+            continue  # this sequence stays clear of the ground on this arm
+        firsts = [run.first_contact for run in runs.values()]
+        if sequence in ("biased", "press"):  # the sequences that drive into the ground (random may graze it)
             assert None not in firsts and abs(firsts[0] - firsts[1]) <= 8, f"{arm.name} {sequence}: {firsts}"
-            bound = tol.ee_rms_m(sequence, "contact")
-            assert gap.contact_ee_rms_m is not None and gap.contact_ee_rms_m <= bound, (
-                f"{arm.name} {sequence}: {gap.contact_ee_rms_m * 1e3:.1f} mm"
-            )
-    finally:
-        for env in envs.values():
-            env.close()
+        bound = CONTACT_MEASURED.get((arm.name, sequence), tol.ee_rms_m(sequence, "contact"))
+        assert gap.contact_ee_rms_m is not None and gap.contact_ee_rms_m <= bound, (
+            f"{arm.name} {sequence}: {gap.contact_ee_rms_m * 1e3:.1f} mm"
+        )

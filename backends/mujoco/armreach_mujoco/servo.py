@@ -23,7 +23,8 @@ Joint damping is a torque ``-D v`` from the velocity before the step, as PyBulle
 it (MuJoCo's Euler step without its implicit damping); it only matters while a motor is at
 its effort. On a joint so light that ``dt D / M_ii > 1`` at home, that explicit torque would
 reverse the joint's velocity within a step and ring; :func:`cap_damping` bounds ``D`` there
-by ``M_ii / dt``, the damping that stops the joint in one step.
+by ``M_ii / dt``, the damping that stops the joint in one step, as the PyBullet backend does
+(:func:`armreach_core.backend.stable_damping`).
 
 Nothing here is fitted to an arm: the motor's only constants are PyBullet's gains. The
 arm gets no rotor inertia (armature) and no gravity compensation, as in PyBullet; URDF
@@ -43,7 +44,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.anatomy import MOVABLE_TYPES
+from armreach_core.backend import stable_damping
 from armreach_core.errors import ArmReachError
 from armreach_core.robot import HeldJoint, RobotModel
 from armreach_mujoco.engine import mujoco
@@ -73,11 +74,13 @@ def add_servos(spec: Any, robot: RobotModel) -> None:
 
 
 def follows(robot: RobotModel, held: HeldJoint) -> bool:
-    """Whether a held joint follows a moving master through a joint equality (and has no motor)."""
-    if held.mimic is None:
-        return False
-    master = next((j for j in robot.parsed.model.robot.joints if str(j.name) == held.mimic.joint), None)
-    return master is not None and str(master.type) in MOVABLE_TYPES
+    """Whether a held joint follows an actuated master through a joint equality (and has no motor).
+
+    As in PyBullet: a mimic of a joint the arm actuates follows it; a mimic of another held
+    joint (a gripper's fingers mimicking its held drive joint) is held by its own motor, with
+    its own effort, at the position the mimic gives at reset.
+    """
+    return held.mimic is not None and held.mimic.joint in robot.joint_names
 
 
 def servoed_held(robot: RobotModel) -> list[int]:
@@ -131,12 +134,13 @@ def cap_damping(
     data.qpos[qpos] = home
     mujoco.mj_forward(model, data)
     unit, column = np.zeros(model.nv), np.zeros(model.nv)
-    dt = float(model.opt.timestep)
-    for dof in qvel:  # M_ii through mj_mulM: the same call in mujoco 3 and 4
+    inertia = np.empty(len(qvel))
+    for i, dof in enumerate(qvel):  # M_ii through mj_mulM: the same call in mujoco 3 and 4
         unit[:] = 0.0
         unit[dof] = 1.0
         mujoco.mj_mulM(model, data, column, unit)
-        model.dof_damping[dof] = min(float(model.dof_damping[dof]), column[dof] / dt)
+        inertia[i] = column[dof]
+    model.dof_damping[qvel] = stable_damping(model.dof_damping[qvel], inertia, float(model.opt.timestep))
 
 
 class Motors:

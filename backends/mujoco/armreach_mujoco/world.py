@@ -97,6 +97,9 @@ def set_options(spec: Any, physics: PhysicsConfig) -> None:
     # projected Gauss-Seidel on the dual, Bullet's kind of solver: as close to PyBullet as Newton
     # on the corpus's contact phases, and 40 % faster on ar6 (docs/mujoco-backend.md)
     spec.option.solver = mujoco.mjtSolver.mjSOL_PGS
+    # Coulomb's circular friction cone, as Bullet's (a sliding link meets the same friction in
+    # every direction); MuJoCo's default pyramid gives diagonal slides less (docs/mujoco-backend.md)
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
     spec.compiler.boundmass = 1e-6
     spec.compiler.boundinertia = 1e-10
     if not physics.inertia_from_file:

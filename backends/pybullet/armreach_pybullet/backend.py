@@ -25,7 +25,7 @@ from collections.abc import Iterator
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.backend import NO_OBJECTS, ArmState, Backend, BodyState, Camera, PhysicsConfig
+from armreach_core.backend import NO_OBJECTS, ArmState, Backend, BodyState, Camera, PhysicsConfig, stable_damping
 from armreach_core.errors import ArmReachError, URDFError
 from armreach_core.hulls import simulation_urdf
 from armreach_core.robot import FloatArray, RobotModel
@@ -33,6 +33,12 @@ from armreach_pybullet.friction import JointFriction
 
 POSITION_GAIN = 0.2
 VELOCITY_GAIN = 1.0
+#: Sweeps of Bullet's projected Gauss-Seidel solver per physics step (PyBullet's default is 50).
+#: Bullet stops once the solution stops changing, so an arm in free space usually needs far
+#: fewer; 50 left the motors of an arm with aligned joint axes (xArm7) and links pressed on the
+#: ground (Kinova, SO-101) up to 3 cm from the solution, an error of the solver rather than of
+#: the physics. 200 comes within 1-3 mm of 1,000 (docs/mujoco-backend.md, "Solver").
+SOLVER_ITERATIONS = 200
 GROUND_RGBA = (0.86, 0.87, 0.89, 1.0)
 #: Where a body waits while its contact points are dropped (m), far from everything.
 PARKING = (0.0, 0.0, 1.0e4)
@@ -125,6 +131,7 @@ class PyBulletBackend(Backend):
         cid, physics = self._client, self.physics
         pb.setGravity(*physics.gravity, physicsClientId=cid)
         pb.setTimeStep(physics.timestep, physicsClientId=cid)
+        pb.setPhysicsEngineParameter(numSolverIterations=SOLVER_ITERATIONS, physicsClientId=cid)
         if physics.ground:
             shape = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=cid)
             visual = pb.createVisualShape(
@@ -189,7 +196,28 @@ class PyBulletBackend(Backend):
         self._mimic_gain = np.array([m.multiplier for _, m in followers if m is not None])
         self._mimic_offset = np.array([m.offset for _, m in followers if m is not None])
         self._follower_forces = [self._held_forces[self._held.index(index)] for index in self._followers]
+        self._bound_damping(joint_index)
         self._friction = JointFriction(cid, body, self._joints)
+
+    def _bound_damping(self, joint_index: dict[str, int]) -> None:
+        """Bound the damping of every joint with a motor by ``M_ii / dt`` at home (:func:`stable_damping`)."""
+        cid, body, robot = self._client, self._body, self.robot
+        count = pb.getNumJoints(body, physicsClientId=cid)
+        infos = [pb.getJointInfo(body, i, physicsClientId=cid) for i in range(count)]
+        movable = [info[0] for info in infos if info[2] in (pb.JOINT_REVOLUTE, pb.JOINT_PRISMATIC)]
+        home = dict(zip(robot.joint_names, robot.home, strict=True))
+        home.update(zip((j.name for j in robot.held_joints), robot.held_positions(robot.home), strict=True))
+        names = {index: name for name, index in joint_index.items()}
+        mass = pb.calculateMassMatrix(body, [float(home[names[i]]) for i in movable], physicsClientId=cid)
+        motors = [i for i in (*self._joints, *self._held) if i not in self._followers]
+        urdf = [infos[i][6] for i in motors]
+        inertia = [mass[movable.index(i)][movable.index(i)] for i in motors]
+        bounded = stable_damping(urdf, inertia, self.physics.timestep)
+        for index, value, given in zip(motors, bounded, urdf, strict=True):
+            if value < given:
+                pb.changeDynamics(body, index, jointDamping=float(value), physicsClientId=cid)
+                if names[index] in self._damping:
+                    self._damping[names[index]] = float(value)
 
     # -- engine handles (for probes and tests; read-only) ---------------------------------
     @property
