@@ -536,3 +536,29 @@ def test_motor_step_gathers_the_same_as_it_views(monkeypatch):
     viewed = run()
     monkeypatch.setattr(servo, "_contiguous", lambda index: index)
     np.testing.assert_array_equal(run(), viewed)
+
+
+def test_a_mimic_follows_an_actuated_master_and_has_its_own_motor_otherwise(tmp_path):
+    """As in PyBullet: a mimic of a joint the arm actuates follows it (a joint equality, no
+    motor); a mimic of a held joint is held by a motor of its own, with its own effort."""
+    from armreach_mujoco.servo import MOTOR_PREFIX
+    from tests.test_robot import _arm
+
+    tail = (
+        '<joint name="a" type="prismatic"><parent link="hand"/><child link="left"/>'
+        '<limit lower="0.01" upper="0.04" effort="5" velocity="1"/></joint>'
+        '<joint name="b" type="prismatic"><parent link="hand"/><child link="right"/>'
+        '<limit lower="-0.1" upper="0.1" effort="5" velocity="1"/>'
+        '<mimic joint="a" multiplier="-2" offset="0.03"/></joint>'
+    )
+    path = _arm(tmp_path, tail, ("left", "right"))
+    held_master = RobotModel(path, home=[0.1, 0.2, 0.3])
+    actuated_master = RobotModel(path, home=[0.1, 0.2, 0.3, 0.02], tool_joints=("a",))
+    for robot, own_motor in ((held_master, True), (actuated_master, False)):
+        backend = mjb.MuJoCoBackend(robot, PhysicsConfig())
+        model = backend.model
+        b = model.joint("b").id
+        motor = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TENDON, MOTOR_PREFIX + "b") >= 0
+        tied = any(model.eq_type[i] == mujoco.mjtEq.mjEQ_JOINT and model.eq_obj1id[i] == b for i in range(model.neq))
+        backend.close()
+        assert (motor, tied) == (own_motor, not own_motor)
