@@ -2,8 +2,10 @@
 
 Position control uses PyBullet's own motor (``POSITION_CONTROL``) with
 ``positionGain`` :data:`POSITION_GAIN`, ``velocityGain`` :data:`VELOCITY_GAIN` and each
-joint's URDF effort limit as the maximum force. Joint damping comes from the URDF; joint
-friction, set for robustness studies, is a constraint (:mod:`armreach_pybullet.friction`).
+joint's URDF effort limit as the maximum force, solved with up to :data:`SOLVER_ITERATIONS`
+sweeps. Joint damping comes from the URDF, bounded where a joint is too light for PyBullet's
+explicit damping (:func:`armreach_core.backend.stable_damping`, as the MuJoCo backend does);
+joint friction, set for robustness studies, is a constraint (:mod:`armreach_pybullet.friction`).
 
 The robot's root link is placed at the robot's base pose. Joints the arm does not actuate
 (``robot.held_joints``: fingers...) are reset with the arm and held by the same motor; a
