@@ -161,12 +161,14 @@ class BackendContract:
         except NotImplementedError:
             pytest.skip(f"backend {self.backend!r} has no contact queries")
         rng = np.random.default_rng(0)
-        deep = next(
+        sunk = [
             (q, low)
             for q in robot.sample_configurations(rng, 500)
             for low in [ground_violations(robot, q, clearance=-0.02)]
             if low
-        )
+        ]
+        # the pose that puts links least deep past 2 cm: much deeper, the ground throws the arm off within a step
+        deep = min(sunk, key=lambda pose: -min(pose[1].values()))
         world.reset_joints(deep[0])
         world.step()
         touching = set(world.links_in_contact())

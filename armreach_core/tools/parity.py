@@ -14,9 +14,10 @@ Three measurements, all on the reach env built from one URDF:
   (targets ``θ + a · max_joint_step``); a *biased* one, ``N(0.3, 0.5)`` clipped to [-1, 1],
   that drives the arm into the ground; a *scripted* reach, damped-least-squares IK
   (:class:`~armreach_core.ik.IKPolicy`, closed loop on each backend's own joint angles)
-  towards the target the task draws at ``reset(seed=seed)``; and a scripted *press*, the
-  same IK tracking an aim that descends at :data:`PRESS_SPEED` along the vertical through
-  the end effector's home to 2 cm under the ground. The joint
+  tracking an aim that moves at :data:`AIM_SPEED` in a straight line from the end
+  effector's home to the target the task draws at ``reset(seed=seed)``; and a scripted
+  *press*, the same IK with an aim that descends along the vertical through the end
+  effector's home to 2 cm under the ground. The joint
   and end-effector trajectories of each backend are compared with the reference
   backend's (the first one named), split at the first contact of a moving link on either
   backend into a **free-space** phase and a **contact** phase;
@@ -55,11 +56,12 @@ JERK_SEQUENCES = ("random", "biased", "scripted")
 BIAS_MEAN, BIAS_STD = 0.3, 0.5
 #: How far under the ground the press aims (m).
 PRESS_DEPTH = 0.02
-#: How fast the press's aim descends (m/s): ISO 10218-1's reduced speed for work beside people.
-#: Tracking a moving aim keeps the IK loop's steps small; aimed at the final point from the first
-#: step, the loop swung the Pandas through a near-singular pose that amplified the engines'
-#: 1e-4 rad differences about four times per step (docs/parity.md).
-PRESS_SPEED = 0.25
+#: How fast the aim of the scripted reach and press moves (m/s): ISO 10218-1's reduced speed
+#: for work beside people. Tracking a moving aim keeps the IK loop's steps small; aimed at the
+#: final point from the first step, the loop took clipped steps through near-singular poses
+#: (the Pandas' press, Franka's reach to seed 1's target) that amplified the engines' 1e-4 rad
+#: differences about four times per step (docs/parity.md).
+AIM_SPEED = 0.25
 
 
 @dataclass(frozen=True)
@@ -342,6 +344,9 @@ def drive(env: ArmEnv, sequence: str, steps: int, seed: int) -> Trajectory:
     robot, backend = env.robot, env.backend
     policy = IKPolicy(robot, env.max_joint_step)
     home_ee = robot.forward_kinematics(robot.home)
+    goal = task.target if sequence == "scripted" else np.array([home_ee[0], home_ee[1], -PRESS_DEPTH])
+    path = np.asarray(goal, dtype=np.float64) - home_ee
+    length = float(np.linalg.norm(path))
     q_log, ee_log, rewards = np.empty((steps, robot.dof)), np.empty((steps, 3)), np.empty(steps)
     actions = np.empty((steps, robot.dof))
     contact = np.zeros(steps, dtype=bool)
@@ -355,11 +360,9 @@ def drive(env: ArmEnv, sequence: str, steps: int, seed: int) -> Trajectory:
             action = rng.uniform(-1.0, 1.0, robot.dof)
         elif sequence == "biased":
             action = np.clip(rng.normal(BIAS_MEAN, BIAS_STD, robot.dof), -1.0, 1.0)
-        elif sequence == "scripted":
-            action = policy.act(state.q, task.target)
         else:
-            depth = max(home_ee[2] - PRESS_SPEED * (i + 1) * env.physics.control_dt, -PRESS_DEPTH)
-            action = policy.act(state.q, np.array([home_ee[0], home_ee[1], depth]))
+            travelled = AIM_SPEED * (i + 1) * env.physics.control_dt
+            action = policy.act(state.q, home_ee + path * min(1.0, travelled / max(length, 1e-9)))
         actions[i] = action
         start = time.perf_counter()
         _, reward, *_ = env.step(action)
@@ -483,10 +486,11 @@ def markdown(report: ParityReport) -> str:
         f"## Dynamics: gap to {report.reference} over the same actions",
         "",
         "`random`: seeded actions U(-1, 1); `biased`: N(0.3, 0.5) clipped to [-1, 1], into the ground; "
-        "`scripted`: damped-least-squares IK reach to the seeded target (closed loop on each backend's joint "
-        f"angles); `press`: the same IK tracking an aim that descends at {PRESS_SPEED:g} m/s from the end "
-        f"effector's home to {PRESS_DEPTH * 100:g} cm under the ground. Each gap is split at the first contact "
-        "of a moving link on either backend: free space before it, contact from it on.",
+        "`scripted`: damped-least-squares IK (closed loop on each backend's joint angles) tracking an aim "
+        f"that moves at {AIM_SPEED:g} m/s in a straight line from the end effector's home to the seeded target; "
+        f"`press`: the same IK with an aim that descends from the end effector's home to {PRESS_DEPTH * 100:g} cm "
+        "under the ground. Each gap is split at the first contact of a moving link on either backend: free "
+        "space before it, contact from it on.",
         "",
     ]
 
@@ -550,11 +554,11 @@ def markdown(report: ParityReport) -> str:
 
 
 __all__ = [
+    "AIM_SPEED",
     "JERK_SEQUENCES",
     "OPEN_LOOP",
     "PHASES",
     "PRESS_DEPTH",
-    "PRESS_SPEED",
     "SEQUENCES",
     "Gap",
     "Kinematic",
