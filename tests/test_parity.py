@@ -277,3 +277,26 @@ def test_a_backend_without_contact_queries_runs_as_free_space(monkeypatch):
     run = drive(env, "biased", steps=40, seed=0)  # ar6's biased run touches the ground at step 27
     env.close()
     assert not run.contact_known and not run.contact.any() and run.first_contact is None
+
+
+@pytest.mark.parametrize("sequence", ["scripted", "press"])
+def test_the_ik_sequences_track_an_aim_moving_at_a_walking_pace(sequence):
+    """The IK reach and press follow an aim that moves at AIM_SPEED from the end effector's home:
+    the end effector never moves much faster (aimed at the final point from the first step, the
+    loop jumped by clipped steps of several centimetres and amplified the engines' differences),
+    and it gets where the aim goes: the target, or the ground under its home."""
+    from armreach_core.env import ArmEnv
+    from armreach_core.tools.parity import AIM_SPEED, drive
+
+    env = ArmEnv("reach", backend="pybullet")
+    try:
+        run = drive(env, sequence, steps=200, seed=0)
+        dt, target = env.physics.control_dt, env.task.target.copy()
+    finally:
+        env.close()
+    speed = np.linalg.norm(np.diff(run.ee, axis=0), axis=1) / dt
+    assert speed.max() <= 2.0 * AIM_SPEED, f"{speed.max():.2f} m/s"
+    if sequence == "scripted":
+        assert np.linalg.norm(run.ee[-1] - target) < 0.01
+    else:
+        assert run.first_contact is not None and run.ee[-1][2] < run.ee[0][2] - 0.1
