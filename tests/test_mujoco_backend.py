@@ -34,9 +34,9 @@ AR6_HOME = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
 DYNAMIC_BOUNDS = {
     # (arm, sequence): (joint RMS rad, EE RMS m)
     ("ar6", "random"): (0.008, 0.006),  # measured 0.0045 rad, 3.9 mm (0.26 mm before the contact)
-    ("ar6", "scripted"): (0.001, 0.0001),  # measured 0.0002 rad, 0.004 mm (free space 0.001 mm)
+    ("ar6", "scripted"): (0.001, 0.0001),  # measured 0.0004 rad, 0.001 mm
     ("xarm6", "random"): (0.001, 0.0005),  # measured 0.0002 rad, 0.16 mm
-    ("xarm6", "scripted"): (0.001, 0.0005),  # measured 0.0002 rad, 0.09 mm
+    ("xarm6", "scripted"): (0.001, 0.0001),  # measured 0.0002 rad, 0.004 mm (was 0.09 mm aimed at the target)
 }
 
 
