@@ -198,10 +198,10 @@ class PyBulletBackend(Backend):
         self._mimic_gain = np.array([m.multiplier for _, m in followers if m is not None])
         self._mimic_offset = np.array([m.offset for _, m in followers if m is not None])
         self._follower_forces = [self._held_forces[self._held.index(index)] for index in self._followers]
-        self._bound_damping(joint_index)
+        self._bound_damping()
         self._friction = JointFriction(cid, body, self._joints)
 
-    def _bound_damping(self, joint_index: dict[str, int]) -> None:
+    def _bound_damping(self) -> None:
         """Bound the damping of every joint with a motor by ``M_ii / dt`` at home (:func:`stable_damping`)."""
         cid, body, robot = self._client, self._body, self.robot
         count = pb.getNumJoints(body, physicsClientId=cid)
@@ -209,7 +209,7 @@ class PyBulletBackend(Backend):
         movable = [info[0] for info in infos if info[2] in (pb.JOINT_REVOLUTE, pb.JOINT_PRISMATIC)]
         home = dict(zip(robot.joint_names, robot.home, strict=True))
         home.update(zip((j.name for j in robot.held_joints), robot.held_positions(robot.home), strict=True))
-        names = {index: name for name, index in joint_index.items()}
+        names = [info[1].decode() for info in infos]
         mass = pb.calculateMassMatrix(body, [float(home[names[i]]) for i in movable], physicsClientId=cid)
         motors = [i for i in (*self._joints, *self._held) if i not in self._followers]
         urdf = [infos[i][6] for i in motors]
