@@ -96,7 +96,7 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
       Numerical changes of the engines, kept as v0 too: PyBullet's solver runs up to 200
       sweeps (was 50) and, on both engines, a joint too light for its URDF damping
       (``dt D / M_ii > 1``) gets ``D = M_ii / dt``; MuJoCo's friction cone is elliptic and
-      its joint limits as stiff as its contacts. The bundled arm's seeded observations move
+      its joint limits take its contacts' time constant. The bundled arm's seeded observations move
       by at most 1e-4 until it touches the ground.
     """
 
