@@ -6,6 +6,8 @@ registers one Gymnasium id per task (``armreach/Reach-v0``, ...).
 
 from __future__ import annotations
 
+from armreach_core import _compat
+
 from armreach_core.backend import ArmState, Backend, BodyState, Camera, PhysicsConfig
 from armreach_core.env import ArmEnv
 from armreach_core.errors import (
@@ -18,8 +20,8 @@ from armreach_core.errors import (
     PluginError,
     URDFError,
 )
-from armreach_core.hookspecs import hookimpl
-from armreach_core.plugins import (
+from armreach_core.plugins.hookspecs import hookimpl
+from armreach_core.plugins.host import (
     available_backends,
     available_robots,
     available_tasks,
@@ -27,10 +29,10 @@ from armreach_core.plugins import (
     register_plugin,
     unregister_plugin,
 )
-from armreach_core.reach_env import ArmReach6DOFEnv
-from armreach_core.registration import sync_gym_registry
-from armreach_core.robot import RobotModel
-from armreach_core.specs import BackendSpec, RobotSpec, TaskSpec
+from armreach_core.tasks.reach.env import ArmReach6DOFEnv
+from armreach_core.plugins.registration import sync_gym_registry
+from armreach_core.robot.model import RobotModel
+from armreach_core.plugins.specs import BackendSpec, RobotSpec, TaskSpec
 from armreach_core.task import Task
 
 __version__ = "0.1.0"
@@ -65,5 +67,6 @@ __all__ = [
     "unregister_plugin",
 ]
 
+_compat.install()
 get_host().on_rebuild(sync_gym_registry)
 _ = get_host().registry

@@ -1,7 +1,7 @@
 """The narrow interface every physics backend implements.
 
 A backend adapts one engine to armreach and holds no task logic. It is built from a
-:class:`~armreach_core.robot.RobotModel` and addresses joints and links by their URDF
+:class:`~armreach_core.robot.model.RobotModel` and addresses joints and links by their URDF
 names: joint vectors are always in ``robot.joint_names`` order. Units are SI, z is up,
 and quaternions (where a backend exposes orientation) are ``(w, x, y, z)``.
 
@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.errors import ConfigError
-from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.robot.model import FloatArray, RobotModel
 
 
 @dataclass(frozen=True)
@@ -206,7 +206,7 @@ class Scene(ABC):
     def links_in_contact(self) -> tuple[str, ...]:
         """The robot's moving links touching anything (the ground, a body, another link), by URDF name.
 
-        Links fixed to the base (:attr:`~armreach_core.robot.RobotModel.fixed_links`) are left out.
+        Links fixed to the base (:attr:`~armreach_core.robot.model.RobotModel.fixed_links`) are left out.
 
         Read from the last physics step.
         """
@@ -227,7 +227,7 @@ class Backend(Scene):
 
     Diagnostics that are not part of running an env (the bare engine loop of ``armreach
     bench``, the engine-connection count of ``armreach soak``) are not methods here: a
-    backend's plugin offers them as :class:`~armreach_core.specs.BackendProbes`.
+    backend's plugin offers them as :class:`~armreach_core.plugins.specs.BackendProbes`.
     """
 
     def __init__(self, robot: RobotModel, physics: PhysicsConfig, *, viewer: bool = False) -> None:

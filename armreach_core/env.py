@@ -18,9 +18,9 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.backend import ArmState, Backend, Camera, PhysicsConfig
-from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_ROBOT, DEFAULT_TASK
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_ROBOT, DEFAULT_TASK
 from armreach_core.errors import ActionError, ArmReachError, ConfigError, DisplayUnavailableError
-from armreach_core.loading import load_backend_class, load_robot, robot_spec, task_spec
+from armreach_core.plugins.lookup import load_backend_class, load_robot, robot_spec, task_spec
 from armreach_core.task import Task
 
 __all__ = ["JOINT_LIMIT_MODES", "STATE_LIMIT", "ArmEnv", "load_backend_class", "load_robot"]
@@ -51,7 +51,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
 
     Args:
         task: registered task name.
-        backend: registered backend name (default :data:`~armreach_core.defaults.DEFAULT_BACKEND`).
+        backend: registered backend name (default :data:`~armreach_core.plugins.defaults.DEFAULT_BACKEND`).
         urdf: path to a URDF; default the task's bundled robot.
         ee_link: end-effector link; default the robot's.
         render_mode: ``None``, ``"rgb_array"`` (images, no display needed) or ``"human"`` (a
@@ -169,7 +169,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self.camera = camera or Camera()
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.physics.control_dt)}
         try:
-            self.task: Task = spec.load()(self.robot, **task_options)
+            self.task: Task = spec.task_class()(self.robot, **task_options)
         except TypeError as exc:
             raise ConfigError(f"bad option for task {task!r}: {exc}") from exc
 

@@ -22,7 +22,7 @@ import numpy.typing as npt
 from gymnasium import spaces
 
 from armreach_core.backend import ArmState, Scene
-from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.robot.model import FloatArray, RobotModel
 
 __all__ = ["Component", "GoalArray", "ObservationLayout", "Scene", "Score", "Task", "goal_distance"]
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 import armreach_core
-from armreach_core.bundled import asset_path
+from armreach_core.robot.bundled import asset_path
 
 
 def _pybullet_data() -> Path | None:

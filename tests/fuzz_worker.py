@@ -27,7 +27,7 @@ def _build(path: str, backends: list[str], steps: int) -> dict[str, str]:
     import numpy as np
 
     from armreach_core import ArmReach6DOFEnv, URDFError
-    from armreach_core.robot import RobotModel
+    from armreach_core.robot.model import RobotModel
 
     try:
         RobotModel(path)

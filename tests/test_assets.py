@@ -64,5 +64,5 @@ def test_wheel_ships_the_assets(tmp_path):
     assert "armreach_core/py.typed" in names
     assert "armreach_core/tools/bench.py" in names
     entry_points = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("entry_points.txt"))).decode()
-    assert "armreach = armreach_core.default_plugins" in entry_points
+    assert "armreach = armreach_core.plugins.builtin" in entry_points
     assert not any(n.startswith(("backends/", "tasks/", "tests/")) for n in names)

@@ -9,7 +9,7 @@ import pytest
 
 from armreach_core import ArmReach6DOFEnv
 from armreach_core.cli import main
-from armreach_core.loading import load_backend_probes
+from armreach_core.plugins.lookup import load_backend_probes
 from tests.conftest import BACKENDS
 
 

@@ -1,6 +1,6 @@
 """Every public arm of the corpus works with no arguments: end effector, held joints, check_env.
 
-The arms come from :data:`armreach_core.corpus.CORPUS` (descriptions nobody here wrote);
+The arms come from :data:`armreach_core.diagnostics.corpus.CORPUS` (descriptions nobody here wrote);
 one that is not installed is skipped with the command that installs it. What each arm
 must give follows from its URDF alone; the expected end effectors below are what those
 rules give, written down so that a change in them is seen.
@@ -17,17 +17,17 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from armreach_core.anatomy import MOVABLE_TYPES
-from armreach_core.corpus import CORPUS, CorpusArm
-from armreach_core.loading import load_robot
-from armreach_core.robot import RobotModel
-from armreach_core.smoothness import mean_jerk
+from armreach_core.robot.anatomy import MOVABLE_TYPES
+from armreach_core.diagnostics.corpus import CORPUS, CorpusArm
+from armreach_core.plugins.lookup import load_robot
+from armreach_core.robot.model import RobotModel
+from armreach_core.diagnostics.smoothness import mean_jerk
 from tests.conftest import BACKENDS
 
 #: Arms whose meshes make their tests take 2-7 s on a 2-core machine (measured with a cold
 #: mesh cache; the others take under 2 s each, about 13 s together).
 SLOW = {"kinova-jaco", "z1", "so101", "panda", "ur10"}
-#: What the rules of armreach_core.anatomy give: (end effector, gripper joints).
+#: What the rules of armreach_core.robot.anatomy give: (end effector, gripper joints).
 EXPECTED = {
     "ur3": ("tool0", ()),
     "ur5": ("tool0", ()),
@@ -179,7 +179,7 @@ def _disturb(world: Any, names: list[str], value: float) -> None:
 def test_held_joints_are_reset_and_held(arm: CorpusArm, backend: str) -> None:
     """Fingers go back to their hold position at every reset, whatever moved them, and stay there."""
     from armreach_core.backend import PhysicsConfig
-    from armreach_core.loading import load_backend_class
+    from armreach_core.plugins.lookup import load_backend_class
 
     path = _path(arm)
     robot = load_robot(path)
@@ -227,7 +227,7 @@ def test_observation_is_one_consistent_snapshot(arm: CorpusArm, backend: str) ->
 def _parity_runs(arm: CorpusArm) -> dict[str, dict[str, Any]]:
     """Every parity sequence, 200 steps from home with seed 0, on both engines (run once per arm)."""
     from armreach_core.env import ArmEnv
-    from armreach_core.tools.parity import SEQUENCES, drive
+    from armreach_core.diagnostics.parity import SEQUENCES, drive
 
     envs = {name: ArmEnv("reach", backend=name, urdf=_path(arm)) for name in ("pybullet", "mujoco")}
     try:
@@ -246,7 +246,7 @@ def test_engines_agree_in_free_space(arm: CorpusArm) -> None:
     first touches something (``armreach parity``'s tolerances, on every arm), and the same
     smoothness (jerk) throughout the sequences a policy could produce."""
     from armreach_core.backend import PhysicsConfig
-    from armreach_core.tools.parity import JERK_SEQUENCES, Gap, Tolerances
+    from armreach_core.diagnostics.parity import JERK_SEQUENCES, Gap, Tolerances
 
     tol, dt = Tolerances(), PhysicsConfig().control_dt
     for sequence, runs in _parity_runs(arm).items():
@@ -272,7 +272,7 @@ def test_engines_agree_in_contact(arm: CorpusArm) -> None:
     """Random and biased actions and the IK press: wherever a moving link touches the ground, both
     engines move the same while in contact, and where the sequence drives into the ground (biased,
     press) they touch it at most 8 steps apart (measured: 0-2, xArm7's biased run 7)."""
-    from armreach_core.tools.parity import Gap, Tolerances
+    from armreach_core.diagnostics.parity import Gap, Tolerances
 
     tol = Tolerances()
     for sequence, runs in _parity_runs(arm).items():

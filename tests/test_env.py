@@ -200,10 +200,10 @@ def test_targets_are_in_the_ball_and_reachable(env):
 
 def test_target_region_scales_with_the_arm():
     """The bundled arm keeps the paper's 0.5 m ball; another arm's ball is half its reach, at half its reach."""
-    from armreach_core.bundled import asset_path
-    from armreach_core.corpus import corpus_arm
-    from armreach_core.reach import TARGET_RADIUS_FRACTION
-    from armreach_core.workspace import reachability_map
+    from armreach_core.robot.bundled import asset_path
+    from armreach_core.diagnostics.corpus import corpus_arm
+    from armreach_core.tasks.reach.task import TARGET_RADIUS_FRACTION
+    from armreach_core.robot.workspace import reachability_map
 
     bundled = ArmReach6DOFEnv()
     assert bundled.task.sampler.radius == 0.5
@@ -227,8 +227,8 @@ def _yawed(angle: float) -> tuple[float, float, float, float]:
 def test_target_region_faces_where_a_limited_base_joint_points():
     """An arm reaching all round its base faces +x, however its base is turned; SO-100, whose base joint
     turns +-2 rad about the direction -y it points at zero, faces -y, and turns with its base."""
-    from armreach_core.corpus import corpus_arm
-    from armreach_core.workspace import reachability_map
+    from armreach_core.diagnostics.corpus import corpus_arm
+    from armreach_core.robot.workspace import reachability_map
 
     so100, ur3 = corpus_arm("so100").path, corpus_arm("ur3").path
     if so100 is None or ur3 is None:

@@ -35,8 +35,8 @@ from hypothesis import strategies as st
 from hypothesis.configuration import set_hypothesis_home_dir
 from lxml import etree
 
-from armreach_core.bundled import asset_path
-from armreach_core.urdf import MAX_URDF_BYTES
+from armreach_core.robot.bundled import asset_path
+from armreach_core.robot.urdf import MAX_URDF_BYTES
 from tests.conftest import BACKENDS
 
 REPO = Path(__file__).resolve().parent.parent

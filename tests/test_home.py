@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from armreach_core import ConfigError, RobotModel, URDFError
-from armreach_core.corpus import CORPUS
-from armreach_core.home import GROUND_CLEARANCE, default_home, describe, ground_violations
-from armreach_core.ik import solve_with_restarts
-from armreach_core.workspace import reachability_map
+from armreach_core.diagnostics.corpus import CORPUS
+from armreach_core.robot.home import GROUND_CLEARANCE, default_home, describe, ground_violations
+from armreach_core.robot.ik import solve_with_restarts
+from armreach_core.robot.workspace import reachability_map
 
 
 def _load(arm):
@@ -75,7 +75,7 @@ def test_ik_with_restarts_reaches_the_reachable_targets(arm):
 def test_ik_reference_plans_every_task_target_with_every_link_above_the_ground(arm):
     """Low targets most solutions reach with a link in the ground (UR5 with gripper, Z1): the search goes on
     past its restarts until it finds one clear of the ground."""
-    from armreach_core.reach import ReachTask
+    from armreach_core.tasks.reach.task import ReachTask
 
     robot = _load(arm)
     task = ReachTask(robot)

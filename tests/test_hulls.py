@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from lxml import etree
 
-from armreach_core.corpus import corpus_arm
+from armreach_core.diagnostics.corpus import corpus_arm
 from armreach_core.env import ArmEnv
-from armreach_core.hulls import HULL_TOLERANCE, convex_hull, simplified, simulation_urdf
-from armreach_core.robot import RobotModel
+from armreach_core.robot.hulls import HULL_TOLERANCE, convex_hull, simplified, simulation_urdf
+from armreach_core.robot.model import RobotModel
 from tests.conftest import BACKENDS
 
 trimesh = pytest.importorskip("trimesh")

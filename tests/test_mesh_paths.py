@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from armreach_core import ArmReach6DOFEnv, URDFError
-from armreach_core.robot import RobotModel
-from armreach_core.urdf import ALLOW_EXTERNAL_ENV
+from armreach_core.robot.model import RobotModel
+from armreach_core.robot.urdf import ALLOW_EXTERNAL_ENV
 
 #: A tetrahedron every engine reads.
 TETRAHEDRON_OBJ = "v 0 0 0\nv 0.05 0 0\nv 0 0.05 0\nv 0 0 0.05\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"

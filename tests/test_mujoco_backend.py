@@ -15,9 +15,9 @@ import pytest
 
 from armreach_core import ArmEnv, ArmReach6DOFEnv, URDFError
 from armreach_core.backend import Camera, PhysicsConfig
-from armreach_core.ik import IKPolicy
-from armreach_core.robot import RobotModel
-from armreach_core.tools import parity
+from armreach_core.robot.ik import IKPolicy
+from armreach_core.robot.model import RobotModel
+from armreach_core.diagnostics import parity
 
 mujoco = pytest.importorskip("mujoco")
 mjb = pytest.importorskip("armreach_mujoco.backend")
@@ -170,7 +170,7 @@ def test_motor_rows_are_the_last_friction_rows():
 def test_a_motor_pushes_with_its_effort_and_no_more():
     """A joint asked to move further than its effort allows moves as PyBullet's does."""
     pytest.importorskip("pybullet")
-    from armreach_core.statics import gravity_torques
+    from armreach_core.robot.statics import gravity_torques
 
     finals = {}
     for name in ("pybullet", "mujoco"):

@@ -19,7 +19,7 @@ import pytest
 from armreach_core import ArmReach6DOFEnv, BackendUnavailableError
 from armreach_core.backend import ArmState
 from armreach_core.cli import main
-from armreach_core.tools.parity import JERK_SEQUENCES, OPEN_LOOP, SEQUENCES
+from armreach_core.diagnostics.parity import JERK_SEQUENCES, OPEN_LOOP, SEQUENCES
 from tests.conftest import BACKENDS
 
 PAIR = ("pybullet", "mujoco")
@@ -266,7 +266,7 @@ def test_parity_command_needs_two_backends(tmp_path, capsys):
 
 def test_a_backend_without_contact_queries_runs_as_free_space(monkeypatch):
     from armreach_core.env import ArmEnv
-    from armreach_core.tools.parity import drive
+    from armreach_core.diagnostics.parity import drive
 
     env = ArmEnv("reach", backend=BACKENDS[0])
 
@@ -286,7 +286,7 @@ def test_the_ik_sequences_track_an_aim_moving_at_a_walking_pace(sequence):
     loop jumped by clipped steps of several centimetres and amplified the engines' differences),
     and it gets where the aim goes: the target, or the ground under its home."""
     from armreach_core.env import ArmEnv
-    from armreach_core.tools.parity import AIM_SPEED, drive
+    from armreach_core.diagnostics.parity import AIM_SPEED, drive
 
     env = ArmEnv("reach", backend="pybullet")
     try:

@@ -17,8 +17,8 @@ import pytest
 import armreach_core
 from armreach_core import PluginError, RobotSpec, TaskSpec, hookimpl
 from armreach_core.cli import main
-from armreach_core.plugins import DISABLE_ENV, PluginHost, PluginLoadWarning
-from armreach_core.reach import ReachTask
+from armreach_core.plugins.host import DISABLE_ENV, PluginHost, PluginLoadWarning
+from armreach_core.tasks.reach.task import ReachTask
 from tests.conftest import BACKENDS
 
 
@@ -117,7 +117,7 @@ def test_bad_spec_type_is_rejected():
 
 
 def test_broken_entry_point_is_reported_and_others_load():
-    good = EntryPoint(name="armreach", value="armreach_core.default_plugins", group="armreach")
+    good = EntryPoint(name="armreach", value="armreach_core.plugins.builtin", group="armreach")
     broken = EntryPoint(name="broken", value="armreach_no_such_module_xyz", group="armreach")
     host = PluginHost(load_entry_points=False)
     with pytest.warns(PluginLoadWarning, match="plugin 'broken' failed during import"):
@@ -139,7 +139,7 @@ def test_plugin_raising_in_a_hook_is_reported(monkeypatch):
     module.armreach_register_tasks = armreach_register_tasks
     monkeypatch.setitem(__import__("sys").modules, "armreach_test_raiser", module)
     host = PluginHost(load_entry_points=False)
-    good = EntryPoint(name="armreach", value="armreach_core.default_plugins", group="armreach")
+    good = EntryPoint(name="armreach", value="armreach_core.plugins.builtin", group="armreach")
     raiser = EntryPoint(name="raiser", value="armreach_test_raiser", group="armreach")
     host.load_entry_points([good, raiser])
     with pytest.warns(PluginLoadWarning, match="raiser.*boom"):

@@ -103,7 +103,7 @@ def test_a_mesh_format_pybullet_cannot_read_is_a_urdf_error(tmp_path, ar6_urdf):
     from armreach_core import URDFError
     from armreach_core.backend import PhysicsConfig
     from armreach_core.env import load_backend_class
-    from armreach_core.robot import RobotModel
+    from armreach_core.robot.model import RobotModel
 
     (tmp_path / "tip.ply").write_text(TETRAHEDRON_PLY)
     text = ar6_urdf.read_text()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from armreach_core.robot import RobotModel
+from armreach_core.robot.model import RobotModel
 from tests.conftest import BACKENDS
 
 pb = pytest.importorskip("pybullet")
@@ -200,7 +200,7 @@ def test_base_placement_moves_the_kinematics_into_the_world(ar6_urdf):
 )
 def test_bad_base_placements_are_config_errors(ar6_urdf, kwargs, message):
     from armreach_core import ConfigError
-    from armreach_core.loading import load_robot
+    from armreach_core.plugins.lookup import load_robot
 
     with pytest.raises(ConfigError, match=message):
         RobotModel(ar6_urdf, **kwargs)
@@ -209,7 +209,7 @@ def test_bad_base_placements_are_config_errors(ar6_urdf, kwargs, message):
 
 
 def test_load_robot_caches_per_base_placement(ar6_urdf):
-    from armreach_core.loading import load_robot
+    from armreach_core.plugins.lookup import load_robot
 
     assert load_robot(ar6_urdf, base_position=(0, 0, 0.5)) is load_robot(ar6_urdf, base_position=[0.0, 0.0, 0.5])
     assert load_robot(ar6_urdf, base_position=(0, 0, 0.5)) is not load_robot(ar6_urdf)
@@ -219,7 +219,7 @@ def test_load_robot_caches_per_base_placement(ar6_urdf):
 def test_backends_place_the_root_link_at_the_base(ar6_urdf, backend):
     from armreach_core import ArmReach6DOFEnv
     from armreach_core.backend import PhysicsConfig
-    from armreach_core.loading import load_backend_class, load_robot
+    from armreach_core.plugins.lookup import load_backend_class, load_robot
 
     robot = load_robot(ar6_urdf, base_position=(0.4, 0.1, 0.2), base_orientation=(0.9, 0.1, -0.2, 0.3))
     world = load_backend_class(backend)(robot, PhysicsConfig(ground=False))

@@ -1,7 +1,7 @@
 """Statics from the URDF: gravity torques against PyBullet's inverse dynamics, and what they decide.
 
 The torque each joint needs to hold a pose comes from the URDF's inertials alone
-(:mod:`armreach_core.statics`); PyBullet's ``calculateInverseDynamics`` at zero velocity
+(:mod:`armreach_core.robot.statics`); PyBullet's ``calculateInverseDynamics`` at zero velocity
 and acceleration is an independent computation of the same thing. The arms include held
 grippers, mimic fingers and a humanoid's arm whose shoulder cannot hold every pose.
 """
@@ -11,11 +11,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from armreach_core.bundled import asset_path
-from armreach_core.corpus import corpus_arm
-from armreach_core.robot import RobotModel
-from armreach_core.statics import HOLD_MARGIN, effort_ratio, gravity_torques, holdable
-from armreach_core.workspace import ReachabilityMap
+from armreach_core.robot.bundled import asset_path
+from armreach_core.diagnostics.corpus import corpus_arm
+from armreach_core.robot.model import RobotModel
+from armreach_core.robot.statics import HOLD_MARGIN, effort_ratio, gravity_torques, holdable
+from armreach_core.robot.workspace import ReachabilityMap
 
 pybullet = pytest.importorskip("pybullet")
 
@@ -90,7 +90,7 @@ def test_weak_arm_ik_reference_reaches_its_targets_in_episodes():
     """Targets come from poses reached from home along lines the motors hold, and the reference plans such lines:
     on the humanoid's arm (75 % before, stuck lifting the arm through horizontal) it reaches every target."""
     from armreach_core.env import ArmEnv
-    from armreach_core.ik import RESTARTS, IKPolicy
+    from armreach_core.robot.ik import RESTARTS, IKPolicy
 
     env = ArmEnv(urdf=_urdf("talos-left-arm"), backend="pybullet")
     reached = 0

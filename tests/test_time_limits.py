@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import armreach_core
-from armreach_core.plugins import get_host
+from armreach_core.plugins.host import get_host
 from tests.conftest import BACKENDS, TASK_BACKENDS
 
 pytestmark = pytest.mark.skipif(not BACKENDS, reason="no physics backend installed")

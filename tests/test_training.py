@@ -619,7 +619,7 @@ def test_evaluation_can_clip_at_joint_limits_instead_of_ending(
 def test_evaluate_takes_the_arm_flags_and_refuses_an_arm_the_policy_cannot_drive(
     tmp_path: Path, tiny: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from armreach_core.corpus import corpus_arm
+    from armreach_core.diagnostics.corpus import corpus_arm
 
     run_dir = tmp_path / "run"
     assert main(["train", "--algo", "ppo", "--preset", tiny, "--out", str(run_dir)]) == 0

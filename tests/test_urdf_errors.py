@@ -10,7 +10,7 @@ import pytest
 
 import armreach_core
 from armreach_core import URDFError
-from armreach_core.robot import RobotModel
+from armreach_core.robot.model import RobotModel
 
 LINK = '<link name="{0}"><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>'
 JOINT = (

@@ -33,8 +33,8 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from armreach_core.errors import ConfigError
-    from armreach_core.plugins import available_backends
-    from armreach_core.tools.bench import check_backends, run_bench, to_json, to_markdown
+    from armreach_core.plugins.host import available_backends
+    from armreach_core.diagnostics.bench import check_backends, run_bench, to_json, to_markdown
 
     backends = args.backends or [b for b in available_backends() if _importable(b)]
     check_backends(backends)
@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _importable(backend: str) -> bool:
     from armreach_core.errors import BackendUnavailableError
-    from armreach_core.loading import load_backend_class
+    from armreach_core.plugins.lookup import load_backend_class
 
     try:
         load_backend_class(backend)

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from armreach_core.defaults import DEFAULT_BACKEND
+from armreach_core.plugins.defaults import DEFAULT_BACKEND
 
 
 def add_parser(sub: Any) -> None:

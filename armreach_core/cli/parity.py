@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
-from armreach_core.tools.parity import Gap, ParityReport, markdown, run_parity
+from armreach_core.diagnostics.parity import Gap, ParityReport, markdown, run_parity
 
 
 def add_parser(sub: Any) -> None:
@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _corpus(args: argparse.Namespace) -> int:
     """Parity over every installed corpus arm: one folder per arm and one table (markdown and JSON)."""
-    from armreach_core.corpus import CORPUS
+    from armreach_core.diagnostics.corpus import CORPUS
 
     out: Path = args.out or Path("runs") / time.strftime("parity-corpus-%Y%m%d-%H%M%S")
     rows: dict[str, Any] = {}

@@ -6,7 +6,7 @@ import argparse
 import json
 from typing import Any
 
-from armreach_core.plugins import get_host
+from armreach_core.plugins.host import get_host
 
 
 def add_parser(sub: Any) -> None:

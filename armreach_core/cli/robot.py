@@ -32,7 +32,7 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from armreach_core.tools.robot_report import inspect_robot, markdown, picture
+    from armreach_core.diagnostics.robot_report import inspect_robot, markdown, picture
 
     if args.corpus:
         return _corpus(args)
@@ -60,8 +60,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _corpus(args: argparse.Namespace) -> int:
     """One line per corpus arm: home clearance, determinism, memory, steps/s and IK success per engine."""
-    from armreach_core.corpus import CORPUS
-    from armreach_core.tools.robot_report import corpus_table, inspect_robot
+    from armreach_core.diagnostics.corpus import CORPUS
+    from armreach_core.diagnostics.robot_report import corpus_table, inspect_robot
 
     out: Path = args.out or Path("runs") / time.strftime("robot-corpus-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)

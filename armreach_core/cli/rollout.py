@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
-from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_TASK
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.env import ArmEnv
-from armreach_core.ik import RESTARTS, IKPolicy
+from armreach_core.robot.ik import RESTARTS, IKPolicy
 
 
 def add_parser(sub: Any) -> None:

@@ -23,8 +23,8 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from armreach_core.errors import ConfigError
-    from armreach_core.plugins import available_backends
-    from armreach_core.tools.soak import Bounds, as_dict, format_report, soak_backend
+    from armreach_core.plugins.host import available_backends
+    from armreach_core.diagnostics.soak import Bounds, as_dict, format_report, soak_backend
 
     if args.steps < 0 or args.cycles < 0 or args.episode_steps < 1:
         raise ConfigError("--steps and --cycles must be >= 0 and --episode-steps >= 1")
@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _installed(names: list[str]) -> list[str]:
     from armreach_core.errors import BackendUnavailableError
-    from armreach_core.loading import load_backend_class
+    from armreach_core.plugins.lookup import load_backend_class
 
     found = []
     for name in names:

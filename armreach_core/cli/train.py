@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from armreach_core.cli.robot_args import add_robot_arguments
-from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_TASK
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.errors import ConfigError
 
 #: ``--algo`` choices: :data:`armreach_core.rl.presets.ALGOS`, spelled out so that ``--help``

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from armreach_core.cli.robot_args import add_robot_arguments
-from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_TASK
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 
 
 def add_parser(sub: Any) -> None:

@@ -28,7 +28,7 @@ from armreach_core.rl.agents import Agent, IKAgent, SB3Agent, env_kwargs
 from armreach_core.rl.config import RunConfig
 from armreach_core.rl.learners import algo_class
 from armreach_core.rl.metrics import MeanStd, steps_to_goal
-from armreach_core.smoothness import jerk, mean_jerk
+from armreach_core.diagnostics.smoothness import jerk, mean_jerk
 
 
 @dataclass(frozen=True)

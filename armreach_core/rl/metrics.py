@@ -1,7 +1,7 @@
 """The paper's metrics, as pure functions of recorded data.
 
 * **jerk**: third finite difference of joint angles at the control rate (rad/s³), in
-  :mod:`armreach_core.smoothness`;
+  :mod:`armreach_core.diagnostics.smoothness`;
 * **steps to goal**: mean ± std of episode lengths over successful episodes;
 * **convergence episode**: the first episode from which the moving-average episode
   reward stays within ±5 % of its final value for 100 episodes.

@@ -127,12 +127,12 @@ def _task_options() -> dict[str, list[str]]:
     """Keyword options of every registered task's constructor: option -> the tasks that take it."""
     import inspect
 
-    from armreach_core.loading import task_spec
-    from armreach_core.plugins import available_tasks
+    from armreach_core.plugins.lookup import task_spec
+    from armreach_core.plugins.host import available_tasks
 
     options: dict[str, list[str]] = {}
     for name in available_tasks():
-        for parameter in list(inspect.signature(task_spec(name).load()).parameters.values())[1:]:
+        for parameter in list(inspect.signature(task_spec(name).task_class()).parameters.values())[1:]:
             if parameter.kind is parameter.KEYWORD_ONLY or parameter.kind is parameter.POSITIONAL_OR_KEYWORD:
                 options.setdefault(parameter.name, []).append(name)
     return options
@@ -267,7 +267,7 @@ def bundled_presets() -> list[str]:
 
 def plugin_presets() -> dict[str, Path]:
     """Presets the registered tasks ship (``TaskSpec.presets``), by name; armreach's own names win."""
-    from armreach_core.plugins import get_host
+    from armreach_core.plugins.host import get_host
 
     own = set(bundled_presets())
     found: dict[str, Path] = {}

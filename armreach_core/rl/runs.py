@@ -40,7 +40,7 @@ from typing import IO, Any
 import yaml
 
 from armreach_core.errors import ConfigError
-from armreach_core.plugins import get_host
+from armreach_core.plugins.host import get_host
 from armreach_core.rl.config import RunConfig
 
 CONFIG = "config.yaml"

@@ -30,7 +30,7 @@ from typing import Any, TextIO
 
 import yaml
 
-from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_ROBOT, DEFAULT_TASK
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_ROBOT, DEFAULT_TASK
 from armreach_core.errors import ArmReachError, ConfigError
 
 #: What ``pip`` installs for sweeps and tuning.
@@ -103,7 +103,7 @@ class ArmSpec:
 
 def _resolve_urdf(urdf: str | None, where: str) -> tuple[str, str | None]:
     """(label, path) of an arm: ``None``/``ar6`` is the bundled arm, a corpus name its URDF, else a path."""
-    from armreach_core.corpus import CORPUS
+    from armreach_core.diagnostics.corpus import CORPUS
 
     if urdf is None or urdf == DEFAULT_ROBOT:
         return DEFAULT_ROBOT, None

@@ -28,7 +28,7 @@ import numpy.typing as npt
 
 from armreach_core.backend import ArmState, Backend, BodyState, Camera, PhysicsConfig
 from armreach_core.errors import ArmReachError
-from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_mujoco import dynamics
 from armreach_mujoco.compiled import CompiledModel, clear_cache, compiled_model
 from armreach_mujoco.engine import mujoco

@@ -22,7 +22,7 @@ import numpy.typing as npt
 
 from armreach_core.backend import PhysicsConfig
 from armreach_core.errors import URDFError
-from armreach_core.robot import RobotModel
+from armreach_core.robot.model import RobotModel
 from armreach_mujoco import servo, world
 from armreach_mujoco.engine import log
 from armreach_mujoco.urdf_import import spec_from_urdf

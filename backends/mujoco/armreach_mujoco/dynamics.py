@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from armreach_core.errors import ArmReachError
-from armreach_core.robot import RobotModel
+from armreach_core.robot.model import RobotModel
 from armreach_mujoco.compiled import CompiledModel
 
 #: Friction constraint: time constant in physics steps (2 is MuJoCo's stability floor), and

@@ -2,21 +2,9 @@
 
 from __future__ import annotations
 
-from armreach_core.backend import Backend
-from armreach_core.hookspecs import hookimpl
-from armreach_core.specs import BackendProbes, BackendSpec, Register
+from armreach_core.plugins.hookspecs import hookimpl
+from armreach_core.plugins.specs import BackendSpec, Register
 
-
-def _load() -> type[Backend]:
-    from armreach_mujoco.backend import MuJoCoBackend
-
-    return MuJoCoBackend
-
-
-def _probes() -> BackendProbes:
-    from armreach_mujoco.probes import PROBES
-
-    return PROBES
 
 
 @hookimpl
@@ -24,9 +12,9 @@ def armreach_register_backends(register: Register) -> None:
     register(
         BackendSpec(
             name="mujoco",
-            load=_load,
+            load="armreach_mujoco.backend:MuJoCoBackend",
             install="pip install armreach-mujoco mujoco",
             description="MuJoCo, model built from the same URDF with MjSpec (optional backend)",
-            probes=_probes,
+            probes="armreach_mujoco.probes:PROBES",
         )
     )

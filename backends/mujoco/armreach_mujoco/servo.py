@@ -46,7 +46,7 @@ import numpy.typing as npt
 
 from armreach_core.backend import stable_damping
 from armreach_core.errors import ArmReachError
-from armreach_core.robot import HeldJoint, RobotModel
+from armreach_core.robot.model import HeldJoint, RobotModel
 from armreach_mujoco.engine import mujoco
 
 #: PyBullet's ``positionGain`` (the backend's), the fraction of the error closed per physics step.

@@ -15,7 +15,7 @@ import numpy.typing as npt
 
 from armreach_core.backend import NO_OBJECTS, ArmState, BodyState
 from armreach_core.errors import ArmReachError
-from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_mujoco.compiled import CompiledModel
 from armreach_mujoco.engine import mujoco
 from armreach_mujoco.servo import Motors

@@ -17,8 +17,8 @@ import numpy as np
 from lxml import etree
 
 from armreach_core.errors import URDFError
-from armreach_core.hulls import cache_dir, file_key, simulation_urdf, write_obj
-from armreach_core.robot import RobotModel
+from armreach_core.robot.hulls import cache_dir, file_key, simulation_urdf, write_obj
+from armreach_core.robot.model import RobotModel
 from armreach_mujoco.engine import mujoco
 
 #: Mesh formats MuJoCo reads itself; others are converted to .obj with trimesh.
@@ -58,7 +58,7 @@ def urdf_for_mujoco(robot: RobotModel, visuals: bool = True) -> str:
     """The robot's resolved URDF with readable mesh paths and MuJoCo's compiler block.
 
     Collision meshes are their convex hulls (what MuJoCo collides anyway) and, without
-    ``visuals``, there are no visual meshes (:func:`armreach_core.hulls.simulation_urdf`).
+    ``visuals``, there are no visual meshes (:func:`armreach_core.robot.hulls.simulation_urdf`).
     """
     root = etree.fromstring(simulation_urdf(robot, visuals=visuals))
     for mesh in root.iter("mesh"):

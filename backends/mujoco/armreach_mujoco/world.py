@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from armreach_core.backend import PhysicsConfig
-from armreach_core.robot import RobotModel
+from armreach_core.robot.model import RobotModel
 from armreach_mujoco.engine import mujoco
 
 RGBA = tuple[float, float, float, float]

@@ -29,8 +29,8 @@ import numpy.typing as npt
 
 from armreach_core.backend import NO_OBJECTS, ArmState, Backend, BodyState, Camera, PhysicsConfig, stable_damping
 from armreach_core.errors import ArmReachError, URDFError
-from armreach_core.hulls import simulation_urdf
-from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.robot.hulls import simulation_urdf
+from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_pybullet.friction import JointFriction
 
 POSITION_GAIN = 0.2

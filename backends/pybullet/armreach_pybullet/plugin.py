@@ -2,21 +2,9 @@
 
 from __future__ import annotations
 
-from armreach_core.backend import Backend
-from armreach_core.hookspecs import hookimpl
-from armreach_core.specs import BackendProbes, BackendSpec, Register
+from armreach_core.plugins.hookspecs import hookimpl
+from armreach_core.plugins.specs import BackendSpec, Register
 
-
-def _load() -> type[Backend]:
-    from armreach_pybullet.backend import PyBulletBackend
-
-    return PyBulletBackend
-
-
-def _probes() -> BackendProbes:
-    from armreach_pybullet.probes import PROBES
-
-    return PROBES
 
 
 @hookimpl
@@ -24,9 +12,9 @@ def armreach_register_backends(register: Register) -> None:
     register(
         BackendSpec(
             name="pybullet",
-            load=_load,
+            load="armreach_pybullet.backend:PyBulletBackend",
             install="pip install armreach-pybullet pybullet",
             description="PyBullet in DIRECT mode (primary backend)",
-            probes=_probes,
+            probes="armreach_pybullet.probes:PROBES",
         )
     )

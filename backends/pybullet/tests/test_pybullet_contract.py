@@ -1,8 +1,8 @@
-"""The PyBullet backend keeps the contract every backend keeps (armreach_core.testing)."""
+"""The PyBullet backend keeps the contract every backend keeps (armreach_core.diagnostics.contract)."""
 
 from __future__ import annotations
 
-from armreach_core.testing import BackendContract
+from armreach_core.diagnostics.contract import BackendContract
 
 
 class TestPyBulletContract(BackendContract):

@@ -5,8 +5,8 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-from armreach_core import RobotSpec, Task, TaskSpec, hookimpl
-from armreach_core.specs import Register
+from armreach_core import RobotSpec, TaskSpec, hookimpl
+from armreach_core.plugins.specs import Register
 
 ROBOT = "ar6-gripper"
 #: ar6's home pose, fingers open (40 mm each).
@@ -24,11 +24,6 @@ def presets() -> tuple[Path, ...]:
     return tuple(Path(str(folder.joinpath(name))) for name in ("grasp.yaml",))
 
 
-def _grasp_task() -> type[Task]:
-    from armreach_grasp.task import GraspTask
-
-    return GraspTask
-
 
 @hookimpl
 def armreach_register_tasks(register: Register) -> None:
@@ -36,12 +31,13 @@ def armreach_register_tasks(register: Register) -> None:
         TaskSpec(
             name="grasp",
             env_id="armreach/Grasp-v0",
-            load=_grasp_task,
+            load="armreach_grasp.task:GraspTask",
             robot=ROBOT,
             max_episode_steps=100,
             entry_point="armreach_grasp.env:ArmGraspEnv",
             description="pick a cube from a table with a parallel gripper and lift it 10 cm",
             presets=presets(),
+            zoo_hyperparams=Path(str(resources.files("armreach_grasp").joinpath("rl_zoo3.yml"))),
         )
     )
 

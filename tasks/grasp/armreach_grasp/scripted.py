@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.robot.model import FloatArray, RobotModel
 
 
 def rotation_vector(rotation: FloatArray) -> FloatArray:

@@ -28,7 +28,7 @@ from gymnasium import spaces
 
 from armreach_core import ConfigError
 from armreach_core.backend import ArmState
-from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.task import Component, GoalArray, ObservationLayout, Scene, Task, goal_distance
 
 OBJECT, TABLE, GOAL_MARKER = "object", "table", "goal"

@@ -2,14 +2,9 @@
 
 from __future__ import annotations
 
-from armreach_core import Task, TaskSpec, hookimpl
-from armreach_core.specs import Register
+from armreach_core import TaskSpec, hookimpl
+from armreach_core.plugins.specs import Register
 
-
-def _load() -> type[Task]:
-    from armreach_mytask.task import MyTask  # imported only when the env is made
-
-    return MyTask
 
 
 @hookimpl
@@ -18,7 +13,7 @@ def armreach_register_tasks(register: Register) -> None:
         TaskSpec(
             name="mytask",
             env_id="armreach/MyTask-v0",
-            load=_load,
+            load="armreach_mytask.task:MyTask",  # imported only when the env is made
             robot="ar6",  # a registered robot; register your own with armreach_register_robots
             max_episode_steps=200,  # Gymnasium's TimeLimit (spec.max_episode_steps)
             description="move the end effector to a point above the ground and hold it there",

@@ -24,7 +24,7 @@ from gymnasium import spaces
 
 from armreach_core import ConfigError, Task
 from armreach_core.backend import ArmState
-from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.task import Component, GoalArray, ObservationLayout, Scene, goal_distance
 
 MARKER = "point"

@@ -4,7 +4,7 @@ from armreach_core import TaskSpec, hookimpl
 
 
 def _load():
-    from armreach_core.reach import ReachTask
+    from armreach_core.tasks.reach.task import ReachTask
 
     class ToyReach(ReachTask):
         name = "toy"

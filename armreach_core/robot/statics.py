@@ -4,7 +4,7 @@ Each link's mass (its ``<inertial>``) is lumped onto the actuated chain joint it
 at its centre of mass; a joint's gravity torque is the moment of everything it carries about
 its axis. A pose is *holdable* when every joint needs at most :data:`HOLD_MARGIN` of its URDF
 effort limit, leaving the rest to move. Used to keep targets to poses the arm can hold
-(:mod:`armreach_core.workspace`): an arm whose motors are weak for its weight (a humanoid's
+(:mod:`armreach_core.robot.workspace`): an arm whose motors are weak for its weight (a humanoid's
 arm) is otherwise asked to reach targets it can touch only on paper.
 """
 
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.robot.kinematics import ArmKinematics, FloatArray
 
 #: Standard gravity in the world frame (m/s²), as both engines use it.
 GRAVITY = np.array([0.0, 0.0, -9.81])
@@ -33,13 +33,11 @@ class MassModel:
 
 
 @functools.lru_cache(maxsize=32)
-def mass_model(robot: RobotModel) -> MassModel:
+def mass_model(robot: ArmKinematics) -> MassModel:
     """The (cached) lumped masses of ``robot``'s arm (off-chain joints where the robot holds them)."""
-    from armreach_core.home import link_transforms
-
     n = robot.arm_dof
     reference = robot.clip(np.zeros(robot.dof))
-    links = link_transforms(robot, reference)
+    links = robot.link_transforms(reference)
     _, children = robot.chain_frames(reference)
     masses = np.zeros(n)
     moments = np.zeros((n, 3))
@@ -56,7 +54,7 @@ def mass_model(robot: RobotModel) -> MassModel:
     return MassModel(masses, centers)
 
 
-def gravity_torques(robot: RobotModel, q: npt.ArrayLike) -> FloatArray:
+def gravity_torques(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:
     """Torque (N·m; N for prismatic joints) each arm joint applies to hold ``q`` still, shape (..., arm_dof)."""
     model = mass_model(robot)
     frames, children = robot.chain_frames(q)
@@ -72,19 +70,19 @@ def gravity_torques(robot: RobotModel, q: npt.ArrayLike) -> FloatArray:
     return np.stack(torques, axis=-1)
 
 
-def effort_ratio(robot: RobotModel, q: npt.ArrayLike) -> FloatArray:
+def effort_ratio(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:
     """Per joint, the share of its effort limit that holding ``q`` takes, shape (..., arm_dof)."""
     effort = np.array([joint.effort for joint in robot.joints[: robot.arm_dof]])
     return np.asarray(np.abs(gravity_torques(robot, q)) / effort, dtype=np.float64)
 
 
-def holdable(robot: RobotModel, q: npt.ArrayLike, margin: float = HOLD_MARGIN) -> npt.NDArray[np.bool_]:
+def holdable(robot: ArmKinematics, q: npt.ArrayLike, margin: float = HOLD_MARGIN) -> npt.NDArray[np.bool_]:
     """Whether each pose in ``q`` needs at most ``margin`` of every joint's effort against gravity."""
     return np.asarray(np.all(effort_ratio(robot, q) <= margin, axis=-1))
 
 
 def holdable_paths(
-    robot: RobotModel, start: npt.ArrayLike, goals: npt.ArrayLike, points: int = 16, margin: float = HOLD_MARGIN
+    robot: ArmKinematics, start: npt.ArrayLike, goals: npt.ArrayLike, points: int = 16, margin: float = HOLD_MARGIN
 ) -> npt.NDArray[np.bool_]:
     """Whether each straight joint-space line from ``start`` to a pose of ``goals`` (n, dof) is
     holdable all along (``points`` poses per line, ends included): the path a joint-space

@@ -1,13 +1,15 @@
-"""The robot as the URDF describes it: joints, limits, end effector and forward kinematics.
+"""An arm's kinematics as the URDF describes it: joints, limits, end effector, forward kinematics.
 
-:class:`RobotModel` is the single source of truth every backend and task shares. It is
-built from a URDF alone (through :mod:`armreach_core.urdf`, i.e. yourdfpy) and needs no
-physics engine; its :meth:`RobotModel.forward_kinematics` is the oracle the parity
-tests hold both engines against.
+:class:`ArmKinematics` is built from a parsed URDF (:mod:`armreach_core.robot.urdf`, i.e.
+yourdfpy) and a base placement, needs no physics engine, and never changes once built. Its
+forward kinematics (:meth:`ArmKinematics.link_transforms`, and the end-effector chain as
+the special case the hot paths use) is the one implementation in armreach: the home search,
+the statics and the parity oracle all go through it. :class:`~armreach_core.robot.model.RobotModel`
+adds the home pose.
 
 The arm is the chain of joints from the root link to the end effector (by default the one
-:mod:`armreach_core.anatomy` finds: never a finger). Movable joints off that chain, such as
-a gripper's fingers, are *held* (:attr:`RobotModel.held_joints`): every backend resets them
+:mod:`armreach_core.robot.anatomy` finds: never a finger). Movable joints off that chain, such as
+a gripper's fingers, are *held* (:attr:`ArmKinematics.held_joints`): every backend resets them
 to a fixed position at every reset and holds them there, or, for ``<mimic>`` joints, makes
 them follow their master.
 """
@@ -16,7 +18,7 @@ from __future__ import annotations
 
 import logging
 import math
-import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,16 +26,16 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.anatomy import MOVABLE_TYPES, Tree, default_end_effector
-from armreach_core.errors import ConfigError, URDFError
-from armreach_core.placement import base_pose, pose_matrix, rotation
-from armreach_core.urdf import ParsedURDF, read_urdf
+from armreach_core.errors import URDFError
+from armreach_core.robot.anatomy import MOVABLE_TYPES, Tree, default_end_effector
+from armreach_core.robot.placement import pose_matrix, rotation
+from armreach_core.robot.urdf import ParsedURDF
 
 FloatArray = npt.NDArray[np.float64]
 
 log = logging.getLogger("armreach.robot")
 
-__all__ = ["MOVABLE_TYPES", "HeldJoint", "JointSpec", "Mimic", "RobotModel", "base_pose"]
+__all__ = ["MOVABLE_TYPES", "ArmKinematics", "HeldJoint", "JointSpec", "Mimic", "TreeJoint", "joint_motion"]
 #: Range used for ``continuous`` joints, which the URDF leaves unlimited (rad).
 CONTINUOUS_RANGE = 2.0 * math.pi
 #: Velocity assumed where a URDF gives none (rad/s or m/s).
@@ -78,10 +80,10 @@ class HeldJoint:
         position: where it is held (rad or m): the URDF's zero moved inside the limits or,
             for a mimic joint, ``multiplier * master + offset`` (moved inside its limits)
             with the master at its own hold position (an actuated master: at its zero
-            inside its limits; :meth:`RobotModel.held_positions` follows the actual pose).
+            inside its limits; :meth:`ArmKinematics.held_positions` follows the actual pose).
         effort: the most force a backend's motor may use to hold it (N·m or N).
         mimic: the master it follows, if the URDF says so; backends make it track the
-            master's position (:meth:`RobotModel.held_positions`).
+            master's position (:meth:`ArmKinematics.held_positions`).
     """
 
     name: str
@@ -92,11 +94,31 @@ class HeldJoint:
 
 
 @dataclass(frozen=True)
-class _ChainElement:
-    origin: FloatArray  # 4x4 transform from parent link frame to joint frame
-    axis: FloatArray  # unit axis in the joint frame
-    kind: str  # "fixed", "revolute", "continuous" or "prismatic"
-    index: int  # position in the actuated joint vector, -1 for fixed joints
+class TreeJoint:
+    """One URDF joint, ready for forward kinematics."""
+
+    name: str
+    kind: str  #: "fixed", "revolute", "continuous", "prismatic" (or another URDF type, held still)
+    parent: str
+    child: str
+    origin: FloatArray  #: 4x4 transform from the parent link's frame to the joint's frame
+    axis: FloatArray  #: unit axis in the joint's frame
+    index: int  #: position in the actuated joint vector, -1 if not actuated
+    held: int  #: position in :attr:`ArmKinematics.held_joints`, -1 if not held
+
+
+def joint_motion(kind: str, axis: FloatArray, value: FloatArray) -> FloatArray:
+    """The 4x4 motions of a joint of ``kind`` about (or along) unit ``axis`` by a batch of values."""
+    if kind == "prismatic":
+        out = np.broadcast_to(np.eye(4), (*np.shape(value), 4, 4)).copy()
+        out[..., :3, 3] = np.asarray(value)[..., None] * axis
+        return out
+    return rotation(axis, value)
+
+
+def _frozen(array: FloatArray) -> FloatArray:
+    array.flags.writeable = False
+    return array
 
 
 def _finite(value: object, what: str) -> float:
@@ -109,27 +131,22 @@ def _finite(value: object, what: str) -> float:
     return number
 
 
-class RobotModel:
-    """A serial arm read from a URDF.
+class ArmKinematics:
+    """A serial arm's kinematics, read from a parsed URDF; immutable once built.
 
     Args:
-        urdf: path to the URDF file.
+        parsed: the URDF, read by :func:`armreach_core.robot.urdf.read_urdf`.
         ee_link: the end-effector link; by default a tool centre the URDF names at the end
             of the arm, else the link the gripper hangs from, else the chain's tip (see
-            :mod:`armreach_core.anatomy`; the choice and its reason are logged to
+            :mod:`armreach_core.robot.anatomy`; the choice and its reason are logged to
             ``armreach.robot``).
-        home: initial joint configuration (rad); by default one chosen from the URDF
-            (:mod:`armreach_core.home`).
         tool_joints: movable joints off the chain to the end effector that are actuated
             too (a gripper's fingers), in this order after the chain's joints. They have
             no effect on :meth:`forward_kinematics`; their Jacobian columns are zero.
-            Default none: only the chain is actuated. A mimic joint cannot be one (it
-            follows its master: actuate the master).
-        allow_external_meshes: accept meshes outside the URDF's folder or package (see
-            :func:`armreach_core.urdf.read_urdf`; default: ``ARMREACH_ALLOW_EXTERNAL_MESHES``).
-        base_position: where the root link sits in the world (m); default the origin.
-        base_orientation: the root link's orientation, a quaternion ``(w, x, y, z)``
-            (normalized here); default no rotation. Kinematics are in the world frame.
+            A mimic joint cannot be one (it follows its master: actuate the master).
+        base_position, base_orientation: the checked base placement
+            (:func:`armreach_core.robot.placement.base_pose`): metres, and a unit
+            quaternion ``(w, x, y, z)``. Kinematics are in the world frame.
 
     Attributes:
         joint_names: the actuated joints: the arm's chain, then ``tool_joints``.
@@ -137,32 +154,42 @@ class RobotModel:
         gripper_joints: the movable joints below the link the gripper hangs from, as the
             default end-effector analysis found them (empty without a gripper, or when
             ``ee_link`` was given and the tree alone is ambiguous).
+        tree_joints: every URDF joint, parents before children (:class:`TreeJoint`).
         base_position, base_orientation, base_transform: the base placement.
 
     Raises:
         URDFError: the file cannot be used, with the reason and the fix.
-        ConfigError: a bad ``home`` or base placement.
     """
 
     def __init__(
         self,
-        urdf: str | os.PathLike[str],
+        parsed: ParsedURDF,
         ee_link: str | None = None,
-        home: npt.ArrayLike | None = None,
         tool_joints: tuple[str, ...] = (),
-        *,
-        allow_external_meshes: bool | None = None,
-        base_position: npt.ArrayLike | None = None,
-        base_orientation: npt.ArrayLike | None = None,
+        base_position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        base_orientation: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0),
     ) -> None:
-        position, orientation = base_pose(base_position, base_orientation)
+        self._build(parsed, ee_link, tool_joints, base_position, base_orientation)
+        self._sealed = True
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if getattr(self, "_sealed", False):
+            raise AttributeError(f"{type(self).__name__} is immutable: build another one to change {name!r}")
+        super().__setattr__(name, value)
+
+    def _build(
+        self,
+        parsed: ParsedURDF,
+        ee_link: str | None,
+        tool_joints: tuple[str, ...],
+        position: tuple[float, float, float],
+        orientation: tuple[float, float, float, float],
+    ) -> None:
         #: Where the root link sits in the world (m), and its orientation (w, x, y, z).
         self.base_position: tuple[float, float, float] = position
         self.base_orientation: tuple[float, float, float, float] = orientation
         #: The root link's pose in the world, 4x4 (read-only).
-        self.base_transform: FloatArray = pose_matrix(position, orientation)
-        self.base_transform.flags.writeable = False
-        parsed = read_urdf(urdf, allow_external_meshes=allow_external_meshes)
+        self.base_transform: FloatArray = _frozen(pose_matrix(position, orientation))
         self.parsed: ParsedURDF = parsed
         self.urdf_path: Path = parsed.path
         robot = parsed.model.robot
@@ -235,12 +262,13 @@ class RobotModel:
         self.tool_joint_names: tuple[str, ...] = tuple(str(j.name) for j in tools)
         self.joints: tuple[JointSpec, ...] = tuple(self._joint_spec(j) for j in (*movable, *tools))
         self.joint_names: tuple[str, ...] = tuple(j.name for j in self.joints)
-        self.lower: FloatArray = np.array([j.lower for j in self.joints])
-        self.upper: FloatArray = np.array([j.upper for j in self.joints])
-        self.velocity_limits: FloatArray = np.array([j.velocity for j in self.joints])
-        self._elements = self._build_chain(chain, joints)
+        self.lower: FloatArray = _frozen(np.array([j.lower for j in self.joints]))
+        self.upper: FloatArray = _frozen(np.array([j.upper for j in self.joints]))
+        self.velocity_limits: FloatArray = _frozen(np.array([j.velocity for j in self.joints]))
         self.held_joints: tuple[HeldJoint, ...] = self._held_joints(robot.joints)
-        self.home: FloatArray = self._home(home, base_given=base_position is not None)
+        self.tree_joints: tuple[TreeJoint, ...] = self._tree_joints(joints)
+        on_chain = set(chain)
+        self._chain: tuple[TreeJoint, ...] = tuple(j for j in self.tree_joints if j.name in on_chain)
         #: links joined to the root by fixed joints only: they never move
         self.fixed_links: frozenset[str] = self._fixed_links(robot.joints)
 
@@ -423,66 +451,38 @@ class RobotModel:
             damping=_finite(damping, f"damping of joint {name!r}"),
         )
 
-    def _build_chain(self, chain: list[str], joints: dict[str, Any]) -> tuple[_ChainElement, ...]:
-        elements = []
-        index = 0
-        for name in chain:
-            joint = joints[name]
-            origin = joint.origin
-            origin = np.eye(4) if origin is None else np.asarray(origin, dtype=np.float64)
-            if not np.all(np.isfinite(origin)):
-                raise URDFError(f"joint {name!r} has a non-finite <origin>")
-            kind = str(joint.type)
-            axis = joint.axis
-            axis = np.array([1.0, 0.0, 0.0]) if axis is None else np.asarray(axis, dtype=np.float64)
-            if kind in MOVABLE_TYPES:
-                norm = float(np.linalg.norm(axis))
-                if not math.isfinite(norm) or norm < 1e-9:
-                    raise URDFError(f"joint {name!r} has axis {axis.tolist()}; it must be a finite non-zero vector")
-                axis = axis / norm
-                elements.append(_ChainElement(origin, axis, kind, index))
-                index += 1
-            else:
-                elements.append(_ChainElement(origin, axis, "fixed", -1))
-        return tuple(elements)
-
-    def _home(self, home: npt.ArrayLike | None, *, base_given: bool) -> FloatArray:
-        """The given home, checked (limits, ground), or the default one (:mod:`armreach_core.home`).
-
-        An arm that no pose keeps above the ground, and whose base position was not given,
-        has its base raised by what it lacks (logged), so that it works as it comes.
-        """
-        from armreach_core.home import BelowGroundError, check_home, default_home
-
-        if home is None:
-            try:
-                return default_home(self)
-            except BelowGroundError as exc:
-                if base_given:
-                    raise
-                position = (self.base_position[0], self.base_position[1], self.base_position[2] + exc.lift)
-                log.info("raised the base of %r by %.2f m: %s", self.name, exc.lift, exc)
-                self.base_position = position
-                self.base_transform = pose_matrix(position, self.base_orientation)
-                self.base_transform.flags.writeable = False
-                return default_home(self)
-        try:
-            q = np.asarray(home, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ConfigError(f"home={home!r} must be {self.dof} numbers, one per joint {self.joint_names}") from None
-        if q.shape != (self.dof,) or not np.all(np.isfinite(q)):
-            raise ConfigError(
-                f"home has shape {q.shape}, expected {self.dof} finite numbers, one per joint {self.joint_names}"
-            )
-        if np.any(q < self.lower) or np.any(q > self.upper):
-            outside = [
-                f"{name}={value:.4g} not in [{lo:.4g}, {hi:.4g}]"
-                for name, value, lo, hi in zip(self.joint_names, q, self.lower, self.upper, strict=True)
-                if not lo <= value <= hi
-            ]
-            raise ConfigError(f"home is outside the joint limits: {', '.join(outside)}")
-        check_home(self, q)
-        return q
+    def _tree_joints(self, joints: dict[str, Any]) -> tuple[TreeJoint, ...]:
+        """Every joint, parents first, with its origin, unit axis and where its value comes from."""
+        index = {name: i for i, name in enumerate(self.joint_names)}
+        held = {joint.name: i for i, joint in enumerate(self.held_joints)}
+        out = []
+        for link in self._tree.order:
+            for joint in self._tree.children[link]:
+                name = str(joint.name)
+                origin = np.eye(4) if joint.origin is None else np.asarray(joint.origin, dtype=np.float64)
+                if not np.all(np.isfinite(origin)):
+                    raise URDFError(f"joint {name!r} has a non-finite <origin>")
+                kind = str(joint.type)
+                axis = np.array([1.0, 0.0, 0.0]) if joint.axis is None else np.asarray(joint.axis, dtype=np.float64)
+                if kind in MOVABLE_TYPES:
+                    norm = float(np.linalg.norm(axis))
+                    if not math.isfinite(norm) or norm < 1e-9:
+                        if name in index:
+                            raise URDFError(
+                                f"joint {name!r} has axis {axis.tolist()}; it must be a finite non-zero vector"
+                            )
+                        norm = 1.0
+                    axis = axis / norm
+                joint_index = index.get(name, -1)
+                if kind not in MOVABLE_TYPES:
+                    kind = "fixed" if joint_index < 0 else kind
+                out.append(
+                    TreeJoint(
+                        name, kind, str(joint.parent), str(joint.child), _frozen(origin), _frozen(axis),
+                        joint_index, held.get(name, -1),
+                    )
+                )  # fmt: skip
+        return tuple(out)
 
     # -- kinematics --------------------------------------------------------------------
     def _check_q(self, q: npt.ArrayLike) -> FloatArray:
@@ -491,32 +491,62 @@ class RobotModel:
             raise ValueError(f"joint vector has shape {arr.shape}, expected (..., {self.dof})")
         return arr
 
+    def _walk(self, q: FloatArray, joints: tuple[TreeJoint, ...], held: FloatArray | None = None) -> Iterator[
+        tuple[TreeJoint, FloatArray, FloatArray]
+    ]:
+        """The one forward-kinematics implementation: per joint of ``joints`` (parents first,
+        each parent link reached by an earlier one or the root), its frame and its child
+        link's transform in the world, for joint vectors ``q`` (..., dof).
+
+        A held joint takes its value from ``held`` (..., n_held), zero without it.
+        """
+        batch = q.shape[:-1]
+        frames = {self.root_link: np.broadcast_to(self.base_transform, (*batch, 4, 4))}
+        for joint in joints:
+            frame = frames[joint.parent] @ joint.origin
+            if joint.kind == "fixed":
+                child = frame
+            else:
+                if joint.index >= 0:
+                    value = q[..., joint.index]
+                elif held is not None and joint.held >= 0:
+                    value = held[..., joint.held]
+                else:
+                    value = np.zeros(batch)
+                child = frame @ joint_motion(joint.kind, joint.axis, value)
+            frames[joint.child] = child
+            yield joint, frame, child
+
     def _frames(
         self, q: FloatArray, children: list[FloatArray] | None = None
     ) -> tuple[FloatArray, list[tuple[FloatArray, FloatArray, str]]]:
-        """World transform of the end-effector link and, per actuated joint, (origin, axis, kind).
+        """World transform of the end-effector link and, per actuated chain joint, (origin, axis, kind).
 
         ``children``, when given, receives each actuated chain joint's child-link transform.
         """
-        batch = q.shape[:-1]
-        transform = np.broadcast_to(self.base_transform, (*batch, 4, 4)).copy()
+        transform = np.broadcast_to(self.base_transform, (*q.shape[:-1], 4, 4))
         joint_frames: list[tuple[FloatArray, FloatArray, str]] = []
-        for element in self._elements:
-            transform = transform @ element.origin
-            if element.index < 0:
+        for joint, frame, child in self._walk(q, self._chain):
+            transform = child
+            if joint.index < 0:
                 continue
-            axis_world = transform[..., :3, :3] @ element.axis
-            joint_frames.append((transform[..., :3, 3].copy(), axis_world, element.kind))
-            angle = q[..., element.index]
-            if element.kind == "prismatic":
-                motion = np.broadcast_to(np.eye(4), (*batch, 4, 4)).copy()
-                motion[..., :3, 3] = angle[..., None] * element.axis
-            else:
-                motion = rotation(element.axis, angle)
-            transform = transform @ motion
+            joint_frames.append((frame[..., :3, 3].copy(), frame[..., :3, :3] @ joint.axis, joint.kind))
             if children is not None:
-                children.append(transform)
+                children.append(child)
         return transform, joint_frames
+
+    def link_transforms(self, q: npt.ArrayLike) -> dict[str, FloatArray]:
+        """World transforms of every link for joint vectors ``q`` (dof,) or (batch, dof).
+
+        Joints the robot does not actuate are where the robot holds them
+        (:meth:`held_positions`: a mimic joint follows its master).
+        """
+        values = self._check_q(q)
+        held = np.apply_along_axis(self.held_positions, -1, values) if self.held_joints else None
+        frames = {self.root_link: np.broadcast_to(self.base_transform, (*values.shape[:-1], 4, 4)).copy()}
+        for joint, _, child in self._walk(values, self.tree_joints, held):
+            frames[joint.child] = child
+        return frames
 
     def chain_frames(self, q: npt.ArrayLike) -> tuple[list[tuple[FloatArray, FloatArray, str]], list[FloatArray]]:
         """Per actuated chain joint: (origin, axis, kind) in the world, and its child link's 4x4 world transform."""
@@ -567,4 +597,4 @@ class RobotModel:
         return rng.uniform(self.lower, self.upper, size=(n, self.dof))
 
     def __repr__(self) -> str:
-        return f"RobotModel({self.name!r}, joints={list(self.joint_names)}, ee_link={self.ee_link!r})"
+        return f"{type(self).__name__}({self.name!r}, joints={list(self.joint_names)}, ee_link={self.ee_link!r})"

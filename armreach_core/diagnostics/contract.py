@@ -2,7 +2,7 @@
 
 A backend's test folder subclasses :class:`BackendContract` and names its backend::
 
-    from armreach_core.testing import BackendContract
+    from armreach_core.diagnostics.contract import BackendContract
 
     class TestMyEngine(BackendContract):
         backend = "my-engine"
@@ -23,10 +23,10 @@ import numpy as np
 import pytest
 
 from armreach_core.backend import Backend, Camera, PhysicsConfig
-from armreach_core.defaults import DEFAULT_ROBOT
+from armreach_core.plugins.defaults import DEFAULT_ROBOT
 from armreach_core.errors import ArmReachError, BackendUnavailableError
-from armreach_core.loading import load_backend_class, load_robot, robot_spec
-from armreach_core.robot import RobotModel
+from armreach_core.plugins.lookup import load_backend_class, load_robot, robot_spec
+from armreach_core.robot.model import RobotModel
 
 #: How far the engine's end effector may sit from the URDF's forward kinematics (m).
 FK_TOLERANCE = 1e-6
@@ -152,7 +152,7 @@ class BackendContract:
         assert world.read_state().objects["contract-box"].position[2] == pytest.approx(body.position[2])
 
     def test_links_in_contact_name_the_links_in_the_ground(self, world: Backend, robot: RobotModel) -> None:
-        from armreach_core.home import ground_violations
+        from armreach_core.robot.home import ground_violations
 
         world.reset_joints(robot.home)
         world.step()

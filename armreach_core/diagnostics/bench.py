@@ -1,7 +1,7 @@
 """``armreach bench``: what an env step costs next to the engine's own loop, and more.
 
 For each backend, in one run: the bare engine loop doing the physics of one env step
-(the backend plugin's :class:`~armreach_core.specs.BackendProbes`), the full env step with random actions, reset, env
+(the backend plugin's :class:`~armreach_core.plugins.specs.BackendProbes`), the full env step with random actions, reset, env
 creation with the model cached, vectorized throughput with 1 and 2 worker processes,
 and, when the ``rl`` extra is installed, Stable-Baselines3 training throughput with the
 paper preset (:mod:`armreach_core.rl.throughput`).
@@ -21,7 +21,7 @@ import numpy as np
 
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ArmReachError
-from armreach_core.loading import load_backend_class, load_backend_probes
+from armreach_core.plugins.lookup import load_backend_class, load_backend_probes
 
 #: Targets the numbers are held to.
 TARGETS = {"step_over_bare": 1.25, "reset_ms": 1.0, "create_ms": 50.0}

@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 
 from armreach_core.backend import Camera
-from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_TASK
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ArmReachError
-from armreach_core.home import describe
-from armreach_core.ik import RESTARTS, IKPolicy
-from armreach_core.loading import load_backend_class
-from armreach_core.plugins import available_backends
+from armreach_core.robot.home import describe
+from armreach_core.robot.ik import RESTARTS, IKPolicy
+from armreach_core.plugins.lookup import load_backend_class
+from armreach_core.plugins.host import available_backends
 
 #: What an env may cost on a 2-core machine before the report flags it.
 COST_LIMITS = {"memory_mb": 80.0, "pybullet_steps_per_s": 2000.0, "create_ms": 50.0}
@@ -139,10 +139,10 @@ def _ik(env: ArmEnv, episodes: int, seed: int) -> tuple[float, float]:
 _MEMORY_PROBE = """
 import gc, json, sys
 import numpy as np
-from armreach_core.defaults import DEFAULT_TASK
+from armreach_core.plugins.defaults import DEFAULT_TASK
 from armreach_core.env import ArmEnv
-from armreach_core.loading import load_backend_class
-from armreach_core.tools.soak import rss_mb
+from armreach_core.plugins.lookup import load_backend_class
+from armreach_core.diagnostics.soak import rss_mb
 backend, kwargs = sys.argv[1], json.loads(sys.argv[2])
 load_backend_class(backend)
 def make():
@@ -271,7 +271,7 @@ def inspect_robot(
             )
     working = [f.backend for f in report.engines if f.error is None]
     if len(working) >= 2 and parity_steps:
-        from armreach_core.tools.parity import run_parity
+        from armreach_core.diagnostics.parity import run_parity
 
         extra = {k: v for k, v in kwargs.items() if k not in ("urdf", "ee_link")}
         parity = run_parity(

@@ -2,7 +2,7 @@
 
 Built-in backends and tasks arrive exactly like third-party ones: each distribution
 lists a module in the ``armreach`` entry-point group, that module implements hooks from
-:mod:`armreach_core.hookspecs`, and the :class:`PluginHost` calls them to build a
+:mod:`armreach_core.plugins.hookspecs`, and the :class:`PluginHost` calls them to build a
 :class:`Registry`. A plugin that fails to import, or raises in a hook, is reported by
 its distribution name (a :class:`PluginLoadWarning` and ``armreach plugins``) and the
 others still load. Two plugins registering the same name is a :class:`PluginError`.
@@ -23,9 +23,9 @@ from typing import Any
 
 import pluggy
 
-from armreach_core import hookspecs
+from armreach_core.plugins import hookspecs
 from armreach_core.errors import PluginError
-from armreach_core.specs import BackendSpec, RobotSpec, Spec, TaskSpec, check_name
+from armreach_core.plugins.specs import BackendSpec, RobotSpec, Spec, TaskSpec, check_name
 
 ENTRY_POINT_GROUP = "armreach"
 DISABLE_ENV = "ARMREACH_DISABLE_PLUGINS"

@@ -7,8 +7,8 @@ from collections.abc import Callable
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.robot import FloatArray, RobotModel
-from armreach_core.statics import holdable_paths
+from armreach_core.robot.model import FloatArray, RobotModel
+from armreach_core.robot.statics import holdable_paths
 
 
 def dls_step(robot: RobotModel, q: npt.ArrayLike, target: npt.ArrayLike, damping: float = 0.05) -> FloatArray:
@@ -102,7 +102,7 @@ class IKPolicy:
     kinematics (from the current angles, then from home and ``restarts`` seeded random
     configurations, :func:`solve_with_restarts`, preferring a solution whose straight
     joint-space path from here the motors hold against gravity,
-    :func:`armreach_core.statics.holdable_paths`) and moves all joints together in joint
+    :func:`armreach_core.robot.statics.holdable_paths`) and moves all joints together in joint
     space towards that solution, switching to damped least squares within ``near`` metres of
     the target. This reaches targets where the plain closed loop stops in a local minimum
     or at a joint limit.
@@ -129,7 +129,7 @@ class IKPolicy:
 
     def _feasible(self, start: FloatArray, goal: FloatArray) -> bool:
         """A solution every link of which is above the ground, reached along a line the motors hold."""
-        from armreach_core.home import ground_violations
+        from armreach_core.robot.home import ground_violations
 
         return not ground_violations(self.robot, goal) and bool(holdable_paths(self.robot, start, goal)[0])
 

@@ -17,18 +17,16 @@ import numpy.typing as npt
 
 from armreach_core.backend import Backend
 from armreach_core.errors import BackendUnavailableError, ConfigError
-from armreach_core.placement import base_pose
-from armreach_core.plugins import PluginHost, get_host
-from armreach_core.robot import RobotModel
-from armreach_core.specs import BackendProbes, BackendSpec, RobotSpec, TaskSpec
-from armreach_core.urdf import allow_external_meshes_default
+from armreach_core.robot.placement import base_pose
+from armreach_core.plugins.host import PluginHost, get_host
+from armreach_core.robot.model import RobotModel
+from armreach_core.plugins.specs import BackendProbes, BackendSpec, RobotSpec, TaskSpec
+from armreach_core.robot.urdf import allow_external_meshes_default
 
 
 def _shadowing_hint() -> str:
     """Why the core's own plugin may have failed: a source tree that shadows the installed package."""
-    import armreach_core
-
-    here = Path(armreach_core.__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]  # the armreach_core folder imported
     try:
         installed = Path(str(metadata.distribution("armreach").locate_file("armreach_core"))).resolve()
     except metadata.PackageNotFoundError:
@@ -87,7 +85,7 @@ def load_backend_class(name: str) -> type[Backend]:
     """The Backend class registered as ``name``, importing its engine."""
     spec = backend_spec(name)
     try:
-        return spec.load()
+        return spec.backend_class()
     except ImportError as exc:
         raise BackendUnavailableError(
             f"backend {name!r} cannot start because {exc.name or 'a dependency'} is missing ({exc}); "
@@ -99,7 +97,7 @@ def load_backend_probes(name: str) -> BackendProbes:
     """The diagnostics the backend ``name`` offers (none: an empty :class:`BackendProbes`)."""
     spec = backend_spec(name)
     load_backend_class(name)  # a clear error if the engine is missing
-    return spec.probes() if spec.probes is not None else BackendProbes()
+    return spec.backend_probes()
 
 
 @functools.lru_cache(maxsize=64)

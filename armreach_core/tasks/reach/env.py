@@ -5,9 +5,9 @@ from __future__ import annotations
 import os
 from typing import Any
 
-from armreach_core.defaults import DEFAULT_BACKEND
+from armreach_core.plugins.defaults import DEFAULT_BACKEND
 from armreach_core.env import ArmEnv
-from armreach_core.reach import ReachTask
+from armreach_core.tasks.reach.task import ReachTask
 
 _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
 
@@ -52,7 +52,7 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     ## Starting state
 
     The robot's home configuration with zero velocity (ar6: (0, −π/2, π/2, −π/2, −π/2, 0) rad;
-    another URDF: chosen from the URDF, clear of the ground, see ``armreach_core.home``; joints
+    another URDF: chosen from the URDF, clear of the ground, see ``armreach_core.robot.home``; joints
     off the arm's chain are reset to their hold positions). The target is
     uniform in a ball of radius ``target_radius`` centred at ``target_center`` (ar6: 0.5 m around
     (0.45, 0, 0.45) m; another arm: half its reach ``R`` around ``(R/2, 0, R/2)`` from its base), keeping only points at least ``min_target_height`` (0.05 m) above

@@ -6,7 +6,7 @@ Description:
 
 Randomizations:
     The target, uniformly in the ball, above ``min_target_height`` and inside the arm's
-    reachable set (see :mod:`armreach_core.workspace`), drawn with the env's generator.
+    reachable set (see :mod:`armreach_core.robot.workspace`), drawn with the env's generator.
 
 Success:
     ``distance < success_threshold``; the episode then terminates.
@@ -26,9 +26,9 @@ from gymnasium import spaces
 
 from armreach_core.backend import ArmState
 from armreach_core.errors import ConfigError, URDFError
-from armreach_core.robot import FloatArray, RobotModel
+from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.task import Component, Demonstrator, GoalArray, ObservationLayout, Scene, Task, goal_distance
-from armreach_core.workspace import TargetSampler, reachability_map
+from armreach_core.robot.workspace import TargetSampler, reachability_map
 
 TARGET_MARKER = "target"
 #: How far (rad or m) the observed joint angles may pass the joint limits: an engine with soft
@@ -66,7 +66,7 @@ class ReachTask(Task):
             arm that reaches no point of that ball, the reachable point nearest to it). Forward is
             +x for an arm that reaches all round its base, else the direction its reachable set
             leans to (a base joint of limited range: SO-100 faces -y;
-            :attr:`armreach_core.workspace.ReachabilityMap.forward`).
+            :attr:`armreach_core.robot.workspace.ReachabilityMap.forward`).
         min_target_height: lowest target height (m), default 0.05.
         goal_conditioned: return a Dict observation (observation / achieved_goal /
             desired_goal) for HER, default False.
@@ -252,7 +252,7 @@ class ReachTask(Task):
         return self._distance_term(distance) + self._success_term(distance)
 
     def demonstrator(self, env: Any) -> Demonstrator:
-        """The IK reference (:class:`armreach_core.ik.IKPolicy` with its restarts), reading the env's joints."""
+        """The IK reference (:class:`armreach_core.robot.ik.IKPolicy` with its restarts), reading the env's joints."""
         return _IKDemonstrator(env, self)
 
     def compute_terminated(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any) -> Any:
@@ -267,7 +267,7 @@ class _IKDemonstrator:
         self.reset()
 
     def reset(self) -> None:
-        from armreach_core.ik import RESTARTS, IKPolicy
+        from armreach_core.robot.ik import RESTARTS, IKPolicy
 
         self.policy = IKPolicy(self.task.robot, float(self.env.max_joint_step), restarts=RESTARTS)
 

@@ -7,7 +7,7 @@ For each backend, :func:`soak_backend` runs
   process's resident memory (RSS) as it goes; and
 * **cycles**: ``cycles`` times create an env, reset it, step it a few times and close
   it, counting resident memory, open file descriptors and live engine clients
-  (:attr:`armreach_core.specs.BackendProbes.live_clients`; PyBullet counts its connected
+  (:attr:`armreach_core.plugins.specs.BackendProbes.live_clients`; PyBullet counts its connected
   clients, engines without clients report ``None``) before and after.
 
 Growth is measured from a point after a warm-up (allocator pools, caches and lazy
@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from armreach_core.env import ArmEnv
-from armreach_core.loading import load_backend_probes
+from armreach_core.plugins.lookup import load_backend_probes
 
 
 @dataclass(frozen=True)

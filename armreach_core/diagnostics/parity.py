@@ -7,13 +7,13 @@ Three measurements, all on the reach env built from one URDF:
 
 * **kinematic**: the end-effector position each backend reports after
   ``backend.reset_joints(q)``, against forward kinematics computed from the URDF alone
-  (:meth:`~armreach_core.robot.RobotModel.forward_kinematics`), over random configurations
+  (:meth:`~armreach_core.robot.model.RobotModel.forward_kinematics`), over random configurations
   drawn inside the joint limits;
 * **dynamic**: every backend runs the same control sequences from the home pose through
   ``env.step`` (:data:`SEQUENCES`): a seeded *random* sequence of actions ``U(-1, 1)``
   (targets ``θ + a · max_joint_step``); a *biased* one, ``N(0.3, 0.5)`` clipped to [-1, 1],
   that drives the arm into the ground; a *scripted* reach, damped-least-squares IK
-  (:class:`~armreach_core.ik.IKPolicy`, closed loop on each backend's own joint angles)
+  (:class:`~armreach_core.robot.ik.IKPolicy`, closed loop on each backend's own joint angles)
   tracking an aim that moves at :data:`AIM_SPEED` in a straight line from the end
   effector's home to the target the task draws at ``reset(seed=seed)``; and a scripted
   *press*, the same IK with an aim that descends along the vertical through the end
@@ -37,14 +37,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.defaults import DEFAULT_BACKEND, DEFAULT_TASK
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
-from armreach_core.ik import IKPolicy
-from armreach_core.plugins import available_backends
-from armreach_core.reach import ReachTask
-from armreach_core.robot import FloatArray
-from armreach_core.smoothness import mean_jerk
+from armreach_core.robot.ik import IKPolicy
+from armreach_core.plugins.host import available_backends
+from armreach_core.tasks.reach.task import ReachTask
+from armreach_core.robot.model import FloatArray
+from armreach_core.diagnostics.smoothness import mean_jerk
 
 SEQUENCES = ("random", "biased", "scripted", "press")
 #: Sequences whose actions do not look at the state (the others close the loop through IK).
@@ -82,7 +82,7 @@ class Tolerances:
         contact_scripted_ee_rms_m, contact_random_ee_rms_m: the end-effector bounds of the
             contact phase, closed and open loop.
         jerk_ratio: largest ratio of a backend's mean jerk (the paper's smoothness metric,
-            :func:`armreach_core.smoothness.mean_jerk`) to the reference's, either way round,
+            :func:`armreach_core.diagnostics.smoothness.mean_jerk`) to the reference's, either way round,
             in :data:`JERK_SEQUENCES`.
     """
 
@@ -404,7 +404,7 @@ def run_parity(
 
     Args:
         backends: two or more registered backend names; default every registered one,
-            :data:`~armreach_core.defaults.DEFAULT_BACKEND` first.
+            :data:`~armreach_core.plugins.defaults.DEFAULT_BACKEND` first.
         urdf: the arm; default the bundled ar6.
         ee_link: the end-effector link; default the robot's.
         steps: env steps of each control sequence.

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 from lxml import etree
 
 if TYPE_CHECKING:
-    from armreach_core.robot import RobotModel
+    from armreach_core.robot.model import RobotModel
 
 log = logging.getLogger("armreach.hulls")
 

@@ -2,7 +2,7 @@
 
 The map is the set of voxels that the end effector visits over many joint
 configurations drawn uniformly inside the limits and holdable against gravity with the
-URDF's effort limits (:mod:`armreach_core.statics`; for an arm that cannot hold every
+URDF's effort limits (:mod:`armreach_core.robot.statics`; for an arm that cannot hold every
 pose, also along the straight joint-space path from home), eroded by one voxel so that every
 kept voxel lies inside the reachable set, not on its rim. It depends on the URDF alone
 and a fixed seed, so it is identical on every backend and every run. Voxels are 4 cm,
@@ -18,8 +18,8 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.errors import ConfigError
-from armreach_core.robot import FloatArray, RobotModel
-from armreach_core.statics import holdable, holdable_paths
+from armreach_core.robot.model import FloatArray, RobotModel
+from armreach_core.robot.statics import holdable, holdable_paths
 
 log = logging.getLogger("armreach.workspace")
 
@@ -31,7 +31,7 @@ SAMPLES = 120_000
 _MAP_SEED = 20240607
 #: Below this share of holdable poses the map keeps every pose (with a warning).
 MIN_HOLDABLE = 0.05
-#: Poses checked along each straight path from home (see :func:`armreach_core.statics.holdable_paths`).
+#: Poses checked along each straight path from home (see :func:`armreach_core.robot.statics.holdable_paths`).
 PATH_POINTS = 9
 #: Below this mean resultant length of the reachable voxels' horizontal directions the arm reaches
 #: all round its base (a base joint of about 300 degrees or more) and faces +x; above it, its reachable

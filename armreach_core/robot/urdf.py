@@ -4,7 +4,7 @@ Every URDF that armreach touches goes through :func:`read_urdf`. It refuses DTDs
 entity declarations before any XML parser sees the file (so neither a billion-laughs
 bomb nor an external entity pointing at a local file is ever expanded), parses with an
 lxml parser that resolves nothing and reaches no network, and hands the checked text to
-yourdfpy. Every link and joint is checked first (:mod:`armreach_core.urdf_checks`:
+yourdfpy. Every link and joint is checked first (:mod:`armreach_core.robot.checks`:
 plain finite numbers, non-negative masses, valid inertias, unique names), so engines
 only ever see values they handle. Mesh references (``package://``, ``file://``,
 relative or absolute) are resolved to absolute paths here, once, so that every backend
@@ -24,7 +24,7 @@ import yourdfpy
 from lxml import etree
 
 from armreach_core.errors import URDFError
-from armreach_core.urdf_checks import check_tree
+from armreach_core.robot.checks import check_tree
 
 #: Largest URDF file accepted, in bytes. Real robot descriptions are far smaller.
 MAX_URDF_BYTES = 16 * 1024 * 1024
@@ -161,7 +161,7 @@ def read_urdf(path: str | os.PathLike[str], *, allow_external_meshes: bool | Non
     Raises:
         URDFError: the file is missing, too large, declares a DTD or entities, is not
             well-formed XML, is not a ``<robot>``, breaks a rule of
-            :mod:`armreach_core.urdf_checks`, or names a mesh that does not exist or lies
+            :mod:`armreach_core.robot.checks`, or names a mesh that does not exist or lies
             outside its folder.
     """
     if allow_external_meshes is None:

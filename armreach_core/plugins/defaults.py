@@ -1,7 +1,7 @@
 """The one place the core names a backend, a task and a robot: what is used when none is asked for.
 
 Each is registered by a plugin like any other (the backend by ``armreach-pybullet``, the
-task and the robot by :mod:`armreach_core.default_plugins`); nothing else in the core
+task and the robot by :mod:`armreach_core.plugins.builtin`); nothing else in the core
 refers to them by name.
 """
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-from armreach_core.plugins import Registry
+from armreach_core.plugins.host import Registry
 
 _REGISTERED: set[str] = set()
 

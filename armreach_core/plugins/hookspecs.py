@@ -1,7 +1,7 @@
 """The hooks an armreach plugin may implement.
 
 A plugin is any module or object listed in the ``armreach`` entry-point group (or
-registered in-process with :func:`armreach_core.plugins.register_plugin`) that defines
+registered in-process with :func:`armreach_core.plugins.host.register_plugin`) that defines
 one or more of these functions decorated with :data:`hookimpl`. Each hook receives a
 *register* callable and calls it once per thing it provides.
 """
@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import pluggy
 
 if TYPE_CHECKING:
-    from armreach_core.specs import Register
+    from armreach_core.plugins.specs import Register
 
 hookspec = pluggy.HookspecMarker("armreach")
 hookimpl = pluggy.HookimplMarker("armreach")

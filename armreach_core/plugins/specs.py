@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -12,10 +13,39 @@ from armreach_core.errors import PluginError
 
 if TYPE_CHECKING:
     from armreach_core.backend import Backend
-    from armreach_core.robot import FloatArray
+    from armreach_core.robot.model import FloatArray
     from armreach_core.task import Task
 
 _NAME = re.compile(r"^[a-z][a-z0-9_\-]*$")
+
+#: Where a plugin's object lives: ``"module:attr"`` (imported when first needed), or a
+#: callable returning it (the older form; it still works).
+Ref = str | Callable[[], Any]
+
+
+def resolve(ref: Ref) -> Any:
+    """The object ``ref`` names, importing its module: ``"pkg.mod:Class"`` or a callable returning it.
+
+    The one place entry-point strings are resolved (as Gymnasium's registration does), so a
+    plugin module stays cheap to import and needs no lazy-import wrappers of its own.
+
+    Raises:
+        ImportError: the module, or a dependency it imports, is missing.
+        PluginError: a string that is not ``"module:attr"``, or a module without ``attr``.
+    """
+    if not isinstance(ref, str):
+        return ref()
+    module_name, sep, attr = ref.partition(":")
+    if not sep or not module_name or not attr:
+        raise PluginError(f"{ref!r} is not a \"module:attr\" reference")
+    module = importlib.import_module(module_name)
+    target: Any = module
+    for part in attr.split("."):
+        try:
+            target = getattr(target, part)
+        except AttributeError:
+            raise PluginError(f"{ref!r}: module {module_name!r} has no attribute {attr!r}") from None
+    return target
 
 
 @dataclass(frozen=True)
@@ -42,18 +72,30 @@ class BackendSpec:
 
     Attributes:
         name: what users pass as ``backend=``.
-        load: returns the :class:`~armreach_core.backend.Backend` subclass; it imports the
-            engine, so an ``ImportError`` here means the engine is not installed.
+        load: the :class:`~armreach_core.backend.Backend` subclass as ``"module:Class"``
+            (or a callable returning it); resolving it imports the engine, so an
+            ``ImportError`` there means the engine is not installed.
         install: the command that installs what ``load`` needs (shown in errors).
         description: one line for ``armreach plugins``.
-        probes: returns the backend's :class:`BackendProbes` (imports the engine), or ``None``.
+        probes: the backend's :class:`BackendProbes` as ``"module:attr"`` (or a callable
+            returning them; resolving imports the engine), or ``None``.
     """
 
     name: str
-    load: Callable[[], type[Backend]]
+    load: Ref
     install: str
     description: str = ""
-    probes: Callable[[], BackendProbes] | None = None
+    probes: Ref | None = None
+
+    def backend_class(self) -> type[Backend]:
+        """The Backend subclass (imports the engine)."""
+        cls: type[Backend] = resolve(self.load)
+        return cls
+
+    def backend_probes(self) -> BackendProbes:
+        """The backend's diagnostics (none: an empty :class:`BackendProbes`)."""
+        probes: BackendProbes = BackendProbes() if self.probes is None else resolve(self.probes)
+        return probes
 
 
 @dataclass(frozen=True)
@@ -63,9 +105,10 @@ class TaskSpec:
     Attributes:
         name: the task's name (``reach``).
         env_id: the Gymnasium id (``armreach/Reach-v0``); the namespace must be ``armreach``.
-        load: returns the :class:`~armreach_core.task.Task` subclass.
+        load: the :class:`~armreach_core.task.Task` subclass as ``"module:Class"`` (or a
+            callable returning it).
         robot: the registered robot the task uses when no ``urdf`` is given (``None``:
-            :data:`~armreach_core.defaults.DEFAULT_ROBOT`).
+            :data:`~armreach_core.plugins.defaults.DEFAULT_ROBOT`).
         max_episode_steps: the episode length Gymnasium's ``TimeLimit`` enforces for
             ``env_id`` (``spec.max_episode_steps``); an env constructed directly truncates
             at the same step.
@@ -75,17 +118,28 @@ class TaskSpec:
         description: one line for ``armreach plugins``.
         presets: YAML presets the task ships (``--preset NAME`` finds each by its file name
             without ``.yaml``, after armreach's own).
+        zoo_hyperparams: the task's rl-baselines3-zoo hyperparameter file, keyed by env id
+            (:mod:`armreach_core.rl.zoo` gathers every task's), or ``None``.
+        deprecated_ids: older ids of the env that stay registered, each warning that it is
+            deprecated and naming ``env_id`` (Gymnasium's way: ``Reacher-v4`` beside ``-v5``).
     """
 
     name: str
     env_id: str
-    load: Callable[[], type[Task]]
+    load: Ref
     robot: str | None = None
     max_episode_steps: int = 2048
     defaults: Mapping[str, Any] = field(default_factory=dict)
     entry_point: str = "armreach_core.env:ArmEnv"
     description: str = ""
     presets: tuple[Path, ...] = ()
+    zoo_hyperparams: Path | None = None
+    deprecated_ids: tuple[str, ...] = ()
+
+    def task_class(self) -> type[Task]:
+        """The Task subclass."""
+        cls: type[Task] = resolve(self.load)
+        return cls
 
 
 @dataclass(frozen=True)
@@ -102,7 +156,7 @@ class RobotSpec:
         description: one line for ``armreach plugins``.
         tool_joints: movable joints off the arm's chain that are actuated too (a
             gripper's fingers), appended to the joint vector in this order; ``home``
-            includes them. See :class:`~armreach_core.robot.RobotModel`.
+            includes them. See :class:`~armreach_core.robot.model.RobotModel`.
     """
 
     name: str

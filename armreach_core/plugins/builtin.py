@@ -6,18 +6,15 @@ loaded exactly like a third-party plugin.
 
 from __future__ import annotations
 
-from armreach_core.bundled import asset_path
-from armreach_core.defaults import DEFAULT_ROBOT, DEFAULT_TASK
-from armreach_core.hookspecs import hookimpl
-from armreach_core.specs import Register, RobotSpec, TaskSpec
+from importlib import resources
+from pathlib import Path
+
+from armreach_core.plugins.defaults import DEFAULT_ROBOT, DEFAULT_TASK
+from armreach_core.plugins.hookspecs import hookimpl
+from armreach_core.plugins.specs import Register, RobotSpec, TaskSpec
+from armreach_core.robot.bundled import asset_path
 
 AR6_HOME = (0.0, -1.5707963267948966, 1.5707963267948966, -1.5707963267948966, -1.5707963267948966, 0.0)
-
-
-def _reach_task() -> type:
-    from armreach_core.reach import ReachTask
-
-    return ReachTask
 
 
 @hookimpl
@@ -26,11 +23,12 @@ def armreach_register_tasks(register: Register) -> None:
         TaskSpec(
             name=DEFAULT_TASK,
             env_id="armreach/Reach-v0",
-            load=_reach_task,
+            load="armreach_core.tasks.reach.task:ReachTask",
             robot=DEFAULT_ROBOT,
             max_episode_steps=2048,
-            entry_point="armreach_core.reach_env:ArmReach6DOFEnv",
+            entry_point="armreach_core.tasks.reach.env:ArmReach6DOFEnv",
             description="reach a random 3D target within 5 cm (the paper's ArmReach6DOFEnv)",
+            zoo_hyperparams=Path(str(resources.files("armreach_core.tasks.reach").joinpath("rl_zoo3.yml"))),
         )
     )
 

@@ -1,0 +1,192 @@
+"""An arm's collision geometry as points, from the URDF alone: ground and self-collision checks.
+
+Each link's collision shapes (boxes, spheres, cylinders, meshes through trimesh's convex
+hull) become a small cloud of points in the link's frame; the checks place them with the
+one forward kinematics (:meth:`~armreach_core.robot.kinematics.ArmKinematics.link_transforms`).
+Used by the home search, the IK reference's acceptance and the backend contract.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from armreach_core.robot.kinematics import ArmKinematics, FloatArray
+
+log = logging.getLogger("armreach.geometry")
+
+#: Points of a cylinder's rim per end.
+RIM = 12
+#: Mesh points kept per collision mesh (hull vertices, evenly thinned).
+MESH_POINTS = 256
+
+
+@dataclass(frozen=True)
+class _Geometry:
+    """Every link's collision points in its own frame, and the tree to place them."""
+
+    points: dict[str, FloatArray]  # link -> (k, 3), links with collision geometry only
+    grounded: frozenset[str]  # the root and links fixed to it: they may touch the ground
+    neighbours: frozenset[tuple[str, str]]  # link pairs that may touch (joined by a joint or a fixed chain)
+
+
+@functools.lru_cache(maxsize=128)
+def _mesh_points(filename: str, scale: tuple[float, float, float]) -> FloatArray | None:
+    import trimesh
+
+    try:
+        mesh: Any = trimesh.load(filename, force="mesh")
+        vertices: FloatArray = np.asarray(mesh.convex_hull.vertices, dtype=np.float64)
+    except Exception as exc:  # a mesh trimesh cannot read: the link is checked by its frame alone
+        log.warning("could not read collision mesh %s (%s); its link is checked at its frame only", filename, exc)
+        return None
+    if len(vertices) > MESH_POINTS:
+        vertices = vertices[np.linspace(0, len(vertices) - 1, MESH_POINTS).astype(int)]
+    scaled: FloatArray = vertices * np.asarray(scale, dtype=np.float64)
+    return scaled
+
+
+def _shape_points(geometry: Any) -> FloatArray | None:
+    """Points of a yourdfpy collision geometry in its own frame (``None``: nothing to check)."""
+    if geometry is None:
+        return None
+    if geometry.box is not None:
+        corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64)
+        return corners * (np.asarray(geometry.box.size, dtype=np.float64) / 2)
+    if geometry.sphere is not None:
+        r = float(geometry.sphere.radius)
+        return np.vstack([np.eye(3) * r, -np.eye(3) * r])
+    if geometry.cylinder is not None:
+        r, length = float(geometry.cylinder.radius), float(geometry.cylinder.length)
+        angles = np.linspace(0, 2 * math.pi, RIM, endpoint=False)
+        rim = np.stack([r * np.cos(angles), r * np.sin(angles)], axis=1)
+        return np.vstack([np.column_stack([rim, np.full(RIM, z)]) for z in (-length / 2, length / 2)])
+    if geometry.mesh is not None:
+        scale = np.broadcast_to(np.asarray(1.0 if geometry.mesh.scale is None else geometry.mesh.scale, float), 3)
+        return _mesh_points(str(geometry.mesh.filename), (float(scale[0]), float(scale[1]), float(scale[2])))
+    return None
+
+
+@functools.lru_cache(maxsize=32)
+def _geometry(robot: ArmKinematics) -> _Geometry:
+    """The robot's links' collision points, which may touch the ground, and which may touch each other."""
+    urdf = robot.parsed.model.robot
+    links = [str(link.name) for link in urdf.links]
+    base = robot.root_link
+    order = robot.tree_joints
+    points: dict[str, FloatArray] = {}
+    for link in urdf.links:
+        clouds = []
+        for collision in link.collisions:
+            local = _shape_points(collision.geometry)
+            if local is None:
+                continue
+            transform = np.eye(4) if collision.origin is None else np.asarray(collision.origin, dtype=np.float64)
+            clouds.append(local @ transform[:3, :3].T + transform[:3, 3])
+        if clouds:
+            points[str(link.name)] = np.vstack(clouds)
+    # Rigid groups: links joined by fixed joints move as one body.
+    group = {name: name for name in links}
+    for joint in order:
+        if joint.kind == "fixed":
+            group[joint.child] = group[joint.parent]
+    grounded = frozenset(name for name in links if group[name] == group[base])
+    # Bodies that may touch: those a joint joins, those two joints apart (a joint's housing
+    # overlaps its grandparent's) and siblings on one parent (fingers closing on each other).
+    up_of: dict[str, str] = {group[j.child]: group[j.parent] for j in order if group[j.child] != group[j.parent]}
+    neighbours: set[tuple[str, str]] = set()
+    for body, up in up_of.items():
+        near = {up, up_of.get(up, up)} | {other for other, above in up_of.items() if above == up}
+        for other in near:
+            neighbours.add((body, other))
+            neighbours.add((other, body))
+    pairs = {(x, y) for x in links for y in links if group[x] == group[y] or (group[x], group[y]) in neighbours}
+    return _Geometry(points, grounded, frozenset(pairs))
+
+
+def ground_violations(robot: RobotModel, q: npt.ArrayLike, clearance: float = 0.0) -> dict[str, float]:
+    """Moving links whose collision geometry dips below ``clearance`` (m) at ``q``: link -> lowest z."""
+    geometry = _geometry(robot)
+    frames = robot.link_transforms(q)
+    low: dict[str, float] = {}
+    for link, points in geometry.points.items():
+        if link in geometry.grounded:
+            continue
+        transform = frames[link]
+        z = float((points @ transform[:3, :3].T + transform[:3, 3])[:, 2].min())
+        if z < clearance:
+            low[link] = z
+    return low
+
+
+def lowest_points(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:
+    """Per configuration of ``q`` (..., dof), the lowest z (m) of the moving links' collision geometry."""
+    return _lowest(_geometry(robot), robot.link_transforms(q))
+
+
+def _lowest(geometry: _Geometry, frames: dict[str, FloatArray]) -> FloatArray:
+    """Per configuration, the lowest point of the moving links' collision geometry (batch,)."""
+    lows: list[FloatArray] = []
+    for link, points in geometry.points.items():
+        if link in geometry.grounded:
+            continue
+        transform = frames[link]
+        z = np.einsum("...j,kj->...k", transform[..., 2, :3], points) + transform[..., 2, 3][..., None]
+        lows.append(z.min(axis=-1))
+    if not lows:
+        return np.full(next(iter(frames.values())).shape[:-2], np.inf)
+    lowest: FloatArray = np.min(np.stack(lows), axis=0)
+    return lowest
+
+
+def _boxes(geometry: _Geometry) -> dict[str, tuple[FloatArray, FloatArray]]:
+    """Each link's collision points as a box in its own frame: centre and half extents."""
+    out = {}
+    for link, points in geometry.points.items():
+        low, high = points.min(axis=0), points.max(axis=0)
+        out[link] = ((low + high) / 2, (high - low) / 2)
+    return out
+
+
+def _overlap(a: tuple[FloatArray, FloatArray, FloatArray], b: tuple[FloatArray, FloatArray, FloatArray]) -> bool:
+    """Whether two oriented boxes (centre, rotation, half extents) overlap (separating-axis test)."""
+    ca, ra, ha = a
+    cb, rb, hb = b
+    d = cb - ca
+    axes = [ra[:, i] for i in range(3)] + [rb[:, i] for i in range(3)]
+    axes += [np.cross(ra[:, i], rb[:, j]) for i in range(3) for j in range(3)]
+    for axis in axes:
+        norm = float(np.linalg.norm(axis))
+        if norm < 1e-9:
+            continue
+        axis = axis / norm
+        span = float(np.abs(ra.T @ axis) @ ha + np.abs(rb.T @ axis) @ hb)
+        if abs(float(d @ axis)) > span:
+            return False
+    return True
+
+
+def self_collisions(robot: RobotModel, q: npt.ArrayLike) -> list[tuple[str, str]]:
+    """Pairs of links that are not neighbours whose collision boxes overlap at ``q`` (one configuration)."""
+    geometry = _geometry(robot)
+    frames = robot.link_transforms(np.asarray(q, dtype=np.float64))
+    boxes = _boxes(geometry)
+    placed = {}
+    for link, (centre, half) in boxes.items():
+        transform = frames[link]
+        placed[link] = (transform[:3, :3] @ centre + transform[:3, 3], transform[:3, :3], half)
+    links = sorted(placed)
+    hits = []
+    for i, a in enumerate(links):
+        for b in links[i + 1 :]:
+            if (a, b) in geometry.neighbours:
+                continue
+            if _overlap(placed[a], placed[b]):
+                hits.append((a, b))
+    return hits

@@ -1,0 +1,82 @@
+"""The robot as armreach uses it: the URDF's kinematics placed in the world, and its home.
+
+:class:`RobotModel` is the single source of truth every backend and task shares. It is
+built from a URDF alone (through :mod:`armreach_core.robot.urdf`, i.e. yourdfpy) and needs no
+physics engine; its :meth:`~RobotModel.forward_kinematics` is the oracle the parity tests
+hold both engines against. It is a value: every choice (end effector, home, a raised base)
+is made while it is built, and it never changes afterwards, so it can key caches.
+:func:`armreach_core.robot.factory.build_robot` builds one from an
+:class:`~armreach_core.robot.spec.ArmSpec` and caches it.
+
+The arm is the chain of joints from the root link to the end effector (by default the one
+:mod:`armreach_core.robot.anatomy` finds: never a finger). Movable joints off that chain, such as
+a gripper's fingers, are *held* (:attr:`RobotModel.held_joints`): every backend resets them
+to a fixed position at every reset and holds them there, or, for ``<mimic>`` joints, makes
+them follow their master.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy.typing as npt
+
+from armreach_core.robot.home import place
+from armreach_core.robot.kinematics import MOVABLE_TYPES, ArmKinematics, FloatArray, HeldJoint, JointSpec, Mimic
+from armreach_core.robot.placement import base_pose
+from armreach_core.robot.urdf import read_urdf
+
+__all__ = ["MOVABLE_TYPES", "FloatArray", "HeldJoint", "JointSpec", "Mimic", "RobotModel"]
+
+
+class RobotModel(ArmKinematics):
+    """A serial arm read from a URDF, placed in the world, with its home pose.
+
+    Args:
+        urdf: path to the URDF file.
+        ee_link: the end-effector link; by default a tool centre the URDF names at the end
+            of the arm, else the link the gripper hangs from, else the chain's tip (see
+            :mod:`armreach_core.robot.anatomy`; the choice and its reason are logged to
+            ``armreach.robot``).
+        home: initial joint configuration (rad); by default one chosen from the URDF
+            (:mod:`armreach_core.robot.home`).
+        tool_joints: movable joints off the chain to the end effector that are actuated
+            too (a gripper's fingers), in this order after the chain's joints.
+        allow_external_meshes: accept meshes outside the URDF's folder or package (see
+            :func:`armreach_core.robot.urdf.read_urdf`; default: ``ARMREACH_ALLOW_EXTERNAL_MESHES``).
+        base_position: where the root link sits in the world (m); default the origin, or
+            raised above it when no pose keeps the arm above the ground (logged).
+        base_orientation: the root link's orientation, a quaternion ``(w, x, y, z)``
+            (normalized here); default no rotation. Kinematics are in the world frame.
+
+    Attributes:
+        home: the home pose (read-only array); everything else as
+            :class:`~armreach_core.robot.kinematics.ArmKinematics`.
+
+    Raises:
+        URDFError: the file cannot be used, with the reason and the fix.
+        ConfigError: a bad ``home`` or base placement.
+    """
+
+    def __init__(
+        self,
+        urdf: str | os.PathLike[str],
+        ee_link: str | None = None,
+        home: npt.ArrayLike | None = None,
+        tool_joints: tuple[str, ...] = (),
+        *,
+        allow_external_meshes: bool | None = None,
+        base_position: npt.ArrayLike | None = None,
+        base_orientation: npt.ArrayLike | None = None,
+    ) -> None:
+        position, orientation = base_pose(base_position, base_orientation)
+        parsed = read_urdf(urdf, allow_external_meshes=allow_external_meshes)
+        self._build(parsed, ee_link, tool_joints, position, orientation)
+        placed, q = place(self, home, base_given=base_position is not None)
+        if placed != position:  # the base was raised: the same arm, placed higher
+            self._build(parsed, ee_link, tool_joints, placed, orientation)
+        q = q.copy()
+        q.flags.writeable = False
+        #: The home pose (rad or m per joint, read-only).
+        self.home: FloatArray = q
+        self._sealed = True
