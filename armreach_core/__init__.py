@@ -7,7 +7,6 @@ registers one Gymnasium id per task (``armreach/Reach-v0``, ...).
 from __future__ import annotations
 
 from armreach_core import _compat
-
 from armreach_core.backend import ArmState, Backend, BodyState, Camera, PhysicsConfig
 from armreach_core.env import ArmEnv
 from armreach_core.errors import (
@@ -29,11 +28,11 @@ from armreach_core.plugins.host import (
     register_plugin,
     unregister_plugin,
 )
-from armreach_core.tasks.reach.env import ArmReach6DOFEnv
 from armreach_core.plugins.registration import sync_gym_registry
-from armreach_core.robot.model import RobotModel
 from armreach_core.plugins.specs import BackendSpec, RobotSpec, TaskSpec
+from armreach_core.robot.model import RobotModel
 from armreach_core.task import Task
+from armreach_core.tasks.reach.env import ArmReach6DOFEnv
 
 __version__ = "0.1.0"
 

@@ -18,9 +18,11 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.backend import ArmState, Backend, Camera, PhysicsConfig
-from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_ROBOT, DEFAULT_TASK
 from armreach_core.errors import ActionError, ArmReachError, ConfigError, DisplayUnavailableError
-from armreach_core.plugins.lookup import load_backend_class, load_robot, robot_spec, task_spec
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
+from armreach_core.plugins.lookup import load_backend_class, load_robot, resolve_arm, task_spec
+from armreach_core.robot.factory import build_robot
+from armreach_core.robot.spec import ArmSpec
 from armreach_core.task import Task
 
 __all__ = ["JOINT_LIMIT_MODES", "STATE_LIMIT", "ArmEnv", "load_backend_class", "load_robot"]
@@ -78,6 +80,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             default the origin. Positions in observations are in the world frame.
         base_orientation: the root link's orientation, a quaternion ``(w, x, y, z)``
             (normalized); default no rotation.
+        arm: the arm as one :class:`~armreach_core.robot.spec.ArmSpec`, instead of ``urdf``,
+            ``robot``, ``ee_link``, ``home``, ``tool_joints``, ``base_position``,
+            ``base_orientation`` and ``allow_external_meshes``.
         **task_options: passed to the task.
     """
 
@@ -106,6 +111,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         allow_external_meshes: bool | None = None,
         base_position: npt.ArrayLike | None = None,
         base_orientation: npt.ArrayLike | None = None,
+        arm: ArmSpec | None = None,
         **task_options: Any,
     ) -> None:
         spec = task_spec(task)
@@ -124,33 +130,25 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         if not (isinstance(max_episode_steps, int) and max_episode_steps >= 1):
             raise ConfigError(f"max_episode_steps={max_episode_steps!r} must be a positive integer")
 
-        robot_name = robot or (None if urdf is not None else spec.robot or DEFAULT_ROBOT)
-        if robot_name is not None:
-            if urdf is not None:
-                raise ConfigError("pass either urdf= or robot=, not both")
-            rspec = robot_spec(robot_name)
-            self.robot = load_robot(
-                rspec.urdf,
-                ee_link or rspec.ee_link,
-                home if home is not None else rspec.home,
-                tuple(tool_joints) if tool_joints is not None else rspec.tool_joints,
-                allow_external_meshes=allow_external_meshes,
-                base_position=base_position,
-                base_orientation=base_orientation,
-            )
-            for key, value in rspec.task_defaults.get(task, {}).items():
-                task_options.setdefault(key, value)  # the robot's defaults for this task; the user's win
-        else:
-            assert urdf is not None
-            self.robot = load_robot(
-                urdf,
-                ee_link,
-                home,
-                tuple(tool_joints or ()),
-                allow_external_meshes=allow_external_meshes,
-                base_position=base_position,
-                base_orientation=base_orientation,
-            )
+        given = ArmSpec.create(
+            urdf,
+            ee_link,
+            home,
+            tool_joints,
+            robot=robot,
+            base_position=base_position,
+            base_orientation=base_orientation,
+            allow_external_meshes=allow_external_meshes,
+        )
+        if arm is not None:
+            if given != ArmSpec():
+                raise ConfigError("pass the arm either as arm=ArmSpec(...) or as urdf=, ee_link=, ... keywords")
+            given = arm
+        #: The arm, described once (a registered robot's description filled in).
+        self.arm, robot_defaults = resolve_arm(given, task)
+        for key, value in robot_defaults.items():
+            task_options.setdefault(key, value)  # the robot's defaults for this task; the user's win
+        self.robot = build_robot(self.arm)
 
         self.task_name = task
         self.backend_name = backend

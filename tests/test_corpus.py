@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from armreach_core.robot.anatomy import MOVABLE_TYPES
 from armreach_core.diagnostics.corpus import CORPUS, CorpusArm
-from armreach_core.plugins.lookup import load_robot
-from armreach_core.robot.model import RobotModel
 from armreach_core.diagnostics.smoothness import mean_jerk
+from armreach_core.plugins.lookup import load_robot
+from armreach_core.robot.anatomy import MOVABLE_TYPES
+from armreach_core.robot.model import RobotModel
 from tests.conftest import BACKENDS
 
 #: Arms whose meshes make their tests take 2-7 s on a 2-core machine (measured with a cold
@@ -226,8 +226,8 @@ def test_observation_is_one_consistent_snapshot(arm: CorpusArm, backend: str) ->
 @functools.cache
 def _parity_runs(arm: CorpusArm) -> dict[str, dict[str, Any]]:
     """Every parity sequence, 200 steps from home with seed 0, on both engines (run once per arm)."""
-    from armreach_core.env import ArmEnv
     from armreach_core.diagnostics.parity import SEQUENCES, drive
+    from armreach_core.env import ArmEnv
 
     envs = {name: ArmEnv("reach", backend=name, urdf=_path(arm)) for name in ("pybullet", "mujoco")}
     try:

@@ -185,7 +185,7 @@ def test_paper_reward_default_and_options_are_checked(backend):
 
 
 def test_targets_are_in_the_ball_and_reachable(env):
-    from armreach_core import ik
+    from armreach_core.robot import ik
 
     task = env.unwrapped.task
     robot = env.unwrapped.robot
@@ -200,10 +200,10 @@ def test_targets_are_in_the_ball_and_reachable(env):
 
 def test_target_region_scales_with_the_arm():
     """The bundled arm keeps the paper's 0.5 m ball; another arm's ball is half its reach, at half its reach."""
-    from armreach_core.robot.bundled import asset_path
     from armreach_core.diagnostics.corpus import corpus_arm
-    from armreach_core.tasks.reach.task import TARGET_RADIUS_FRACTION
+    from armreach_core.robot.bundled import asset_path
     from armreach_core.robot.workspace import reachability_map
+    from armreach_core.tasks.reach.task import TARGET_RADIUS_FRACTION
 
     bundled = ArmReach6DOFEnv()
     assert bundled.task.sampler.radius == 0.5

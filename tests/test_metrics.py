@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from armreach_core.rl.metrics import MeanStd, convergence_episode, moving_average, steps_to_goal
 from armreach_core.diagnostics.smoothness import jerk, mean_jerk
+from armreach_core.rl.metrics import MeanStd, convergence_episode, moving_average, steps_to_goal
 
 
 def test_jerk_of_a_cubic_is_its_constant_third_derivative() -> None:

@@ -15,9 +15,9 @@ import pytest
 
 from armreach_core import ArmEnv, ArmReach6DOFEnv, URDFError
 from armreach_core.backend import Camera, PhysicsConfig
+from armreach_core.diagnostics import parity
 from armreach_core.robot.ik import IKPolicy
 from armreach_core.robot.model import RobotModel
-from armreach_core.diagnostics import parity
 
 mujoco = pytest.importorskip("mujoco")
 mjb = pytest.importorskip("armreach_mujoco.backend")

@@ -265,8 +265,8 @@ def test_parity_command_needs_two_backends(tmp_path, capsys):
 
 
 def test_a_backend_without_contact_queries_runs_as_free_space(monkeypatch):
-    from armreach_core.env import ArmEnv
     from armreach_core.diagnostics.parity import drive
+    from armreach_core.env import ArmEnv
 
     env = ArmEnv("reach", backend=BACKENDS[0])
 
@@ -285,8 +285,8 @@ def test_the_ik_sequences_track_an_aim_moving_at_a_walking_pace(sequence):
     the end effector never moves much faster (aimed at the final point from the first step, the
     loop jumped by clipped steps of several centimetres and amplified the engines' differences),
     and it gets where the aim goes: the target, or the ground under its home."""
-    from armreach_core.env import ArmEnv
     from armreach_core.diagnostics.parity import AIM_SPEED, drive
+    from armreach_core.env import ArmEnv
 
     env = ArmEnv("reach", backend="pybullet")
     try:

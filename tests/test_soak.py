@@ -7,9 +7,9 @@ import json
 import pytest
 
 from armreach_core.cli import main
+from armreach_core.diagnostics.soak import Bounds, open_fds, rss_mb, soak_backend
 from armreach_core.env import ArmEnv
 from armreach_core.plugins.lookup import load_backend_probes
-from armreach_core.diagnostics.soak import Bounds, open_fds, rss_mb, soak_backend
 from tests.conftest import BACKENDS
 
 pytestmark = [

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from armreach_core.robot.bundled import asset_path
 from armreach_core.diagnostics.corpus import corpus_arm
+from armreach_core.robot.bundled import asset_path
 from armreach_core.robot.model import RobotModel
 from armreach_core.robot.statics import HOLD_MARGIN, effort_ratio, gravity_torques, holdable
 from armreach_core.robot.workspace import ReachabilityMap

@@ -180,7 +180,7 @@ def test_too_many_links_is_a_urdf_error(tmp_path):
 
 
 def test_a_file_over_the_size_limit_fails_fast(tmp_path, monkeypatch):
-    from armreach_core import urdf
+    from armreach_core.robot import urdf
 
     monkeypatch.setattr(urdf, "MAX_URDF_BYTES", 4096)
     path = _write(tmp_path, LINK.format("a") + LINK.format("b") + JOINT.format("j", "a", "b") + " " * 4096)

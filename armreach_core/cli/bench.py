@@ -32,9 +32,9 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from armreach_core.diagnostics.bench import check_backends, run_bench, to_json, to_markdown
     from armreach_core.errors import ConfigError
     from armreach_core.plugins.host import available_backends
-    from armreach_core.diagnostics.bench import check_backends, run_bench, to_json, to_markdown
 
     backends = args.backends or [b for b in available_backends() if _importable(b)]
     check_backends(backends)

@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
-from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.env import ArmEnv
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.robot.ik import RESTARTS, IKPolicy
 
 

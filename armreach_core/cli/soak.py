@@ -22,9 +22,9 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from armreach_core.diagnostics.soak import Bounds, as_dict, format_report, soak_backend
     from armreach_core.errors import ConfigError
     from armreach_core.plugins.host import available_backends
-    from armreach_core.diagnostics.soak import Bounds, as_dict, format_report, soak_backend
 
     if args.steps < 0 or args.cycles < 0 or args.episode_steps < 1:
         raise ConfigError("--steps and --cycles must be >= 0 and --episode-steps >= 1")

@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from armreach_core.cli.robot_args import add_robot_arguments
-from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.errors import ConfigError
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 
 #: ``--algo`` choices: :data:`armreach_core.rl.presets.ALGOS`, spelled out so that ``--help``
 #: works without the rl extra (a test keeps the two equal).

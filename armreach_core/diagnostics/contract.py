@@ -23,8 +23,8 @@ import numpy as np
 import pytest
 
 from armreach_core.backend import Backend, Camera, PhysicsConfig
-from armreach_core.plugins.defaults import DEFAULT_ROBOT
 from armreach_core.errors import ArmReachError, BackendUnavailableError
+from armreach_core.plugins.defaults import DEFAULT_ROBOT
 from armreach_core.plugins.lookup import load_backend_class, load_robot, robot_spec
 from armreach_core.robot.model import RobotModel
 

@@ -37,14 +37,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
+from armreach_core.diagnostics.smoothness import mean_jerk
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
-from armreach_core.robot.ik import IKPolicy
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.plugins.host import available_backends
-from armreach_core.tasks.reach.task import ReachTask
+from armreach_core.robot.ik import IKPolicy
 from armreach_core.robot.model import FloatArray
-from armreach_core.diagnostics.smoothness import mean_jerk
+from armreach_core.tasks.reach.task import ReachTask
 
 SEQUENCES = ("random", "biased", "scripted", "press")
 #: Sequences whose actions do not look at the state (the others close the loop through IK).

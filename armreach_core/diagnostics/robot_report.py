@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 
 from armreach_core.backend import Camera
-from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ArmReachError
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
+from armreach_core.plugins.host import available_backends
+from armreach_core.plugins.lookup import load_backend_class
 from armreach_core.robot.home import describe
 from armreach_core.robot.ik import RESTARTS, IKPolicy
-from armreach_core.plugins.lookup import load_backend_class
-from armreach_core.plugins.host import available_backends
 
 #: What an env may cost on a 2-core machine before the report flags it.
 COST_LIMITS = {"memory_mb": 80.0, "pybullet_steps_per_s": 2000.0, "create_ms": 50.0}

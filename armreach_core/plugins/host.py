@@ -23,8 +23,8 @@ from typing import Any
 
 import pluggy
 
-from armreach_core.plugins import hookspecs
 from armreach_core.errors import PluginError
+from armreach_core.plugins import hookspecs
 from armreach_core.plugins.specs import BackendSpec, RobotSpec, Spec, TaskSpec, check_name
 
 ENTRY_POINT_GROUP = "armreach"

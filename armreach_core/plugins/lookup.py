@@ -6,22 +6,22 @@ partial, which plugins failed to load and why.
 
 from __future__ import annotations
 
-import functools
 import os
+from dataclasses import replace
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import numpy.typing as npt
 
 from armreach_core.backend import Backend
 from armreach_core.errors import BackendUnavailableError, ConfigError
-from armreach_core.robot.placement import base_pose
+from armreach_core.plugins.defaults import DEFAULT_ROBOT
 from armreach_core.plugins.host import PluginHost, get_host
-from armreach_core.robot.model import RobotModel
 from armreach_core.plugins.specs import BackendProbes, BackendSpec, RobotSpec, TaskSpec
-from armreach_core.robot.urdf import allow_external_meshes_default
+from armreach_core.robot.factory import build_robot
+from armreach_core.robot.model import RobotModel
+from armreach_core.robot.spec import ArmSpec
 
 
 def _shadowing_hint() -> str:
@@ -100,26 +100,22 @@ def load_backend_probes(name: str) -> BackendProbes:
     return spec.backend_probes()
 
 
-@functools.lru_cache(maxsize=64)
-def _robot(
-    path: str,
-    mtime: float,
-    ee_link: str | None,
-    home: tuple[float, ...] | None,
-    tool_joints: tuple[str, ...],
-    external: bool,
-    position: tuple[float, float, float] | None,
-    orientation: tuple[float, float, float, float],
-) -> RobotModel:
-    return RobotModel(
-        path,
-        ee_link=ee_link,
-        home=home,
-        tool_joints=tool_joints,
-        allow_external_meshes=external,
-        base_position=position,
-        base_orientation=orientation,
-    )
+def resolve_arm(arm: ArmSpec, task: str | None = None) -> tuple[ArmSpec, dict[str, Any]]:
+    """``arm`` with a registered robot's description filled in, and that robot's defaults for ``task``.
+
+    An arm that names neither a URDF nor a robot is ``task``'s robot (or
+    :data:`~armreach_core.plugins.defaults.DEFAULT_ROBOT`). An arm that names a URDF is
+    returned as it is, with no task defaults.
+
+    Raises:
+        ConfigError: an unknown robot or task name.
+    """
+    if arm.urdf is not None:
+        return arm, {}
+    name = arm.robot or (task_spec(task).robot if task is not None else None) or DEFAULT_ROBOT
+    spec = robot_spec(name)
+    resolved = replace(arm, robot=name).with_defaults(spec.urdf, spec.ee_link, spec.home, spec.tool_joints)
+    return resolved, dict(spec.task_defaults.get(task, {})) if task is not None else {}
 
 
 def load_robot(
@@ -132,30 +128,20 @@ def load_robot(
     base_position: npt.ArrayLike | None = None,
     base_orientation: npt.ArrayLike | None = None,
 ) -> RobotModel:
-    """A :class:`RobotModel`, cached per (file, modification time, ee_link, home, tool_joints, mesh rule, base pose).
+    """The (cached) :class:`RobotModel` of a URDF: :func:`~armreach_core.robot.factory.build_robot`
+    of the :class:`~armreach_core.robot.spec.ArmSpec` these arguments describe.
 
     Raises:
         ConfigError: a base placement that is not three finite numbers and a non-zero quaternion.
     """
-    base = base_pose(base_position, base_orientation)  # checked and normalized: the cache key
-    # No base position given: the robot may raise its base itself (see RobotModel), so say so.
-    position = None if base_position is None else base[0]
-    path = Path(urdf).expanduser()
-    try:
-        mtime = path.stat().st_mtime if path.is_file() else -1.0
-    except (OSError, ValueError):  # a name too long to look up: RobotModel says it is not found
-        mtime = -1.0
-    home_key = None if home is None else tuple(float(v) for v in np.asarray(home, dtype=np.float64).ravel())
-    tools = tuple(str(name) for name in tool_joints)
-    external = allow_external_meshes_default() if allow_external_meshes is None else bool(allow_external_meshes)
-    if mtime < 0:  # raises the URDFError
-        return RobotModel(
-            path,
-            ee_link=ee_link,
-            home=home,
-            tool_joints=tools,
-            allow_external_meshes=external,
-            base_position=position,
-            base_orientation=base[1],
+    return build_robot(
+        ArmSpec.create(
+            urdf,
+            ee_link,
+            home,
+            tuple(tool_joints),
+            allow_external_meshes=allow_external_meshes,
+            base_position=base_position,
+            base_orientation=base_orientation,
         )
-    return _robot(str(path.resolve()), mtime, ee_link, home_key, tools, external, position, base[1])
+    )

@@ -37,7 +37,7 @@ def resolve(ref: Ref) -> Any:
         return ref()
     module_name, sep, attr = ref.partition(":")
     if not sep or not module_name or not attr:
-        raise PluginError(f"{ref!r} is not a \"module:attr\" reference")
+        raise PluginError(f'{ref!r} is not a "module:attr" reference')
     module = importlib.import_module(module_name)
     target: Any = module
     for part in attr.split("."):

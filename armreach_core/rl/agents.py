@@ -17,9 +17,9 @@ import numpy.typing as npt
 
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
-from armreach_core.robot.ik import RESTARTS, IKPolicy
 from armreach_core.rl.config import RunConfig
 from armreach_core.rl.learners import LEGACY_LEARNER, activation, algo_class, optimizer_kwargs
+from armreach_core.robot.ik import RESTARTS, IKPolicy
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.errors import ConfigError
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.rl.learners import LEGACY_LEARNER, check_learner, check_settings, default_learner
 from armreach_core.rl.presets import ALGOS, OFF_POLICY, RL_ALGOS, load_preset, validate_settings
 

@@ -21,6 +21,7 @@ import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.diagnostics.smoothness import jerk, mean_jerk
 from armreach_core.env import JOINT_LIMIT_MODES, ArmEnv
 from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
@@ -28,7 +29,6 @@ from armreach_core.rl.agents import Agent, IKAgent, SB3Agent, env_kwargs
 from armreach_core.rl.config import RunConfig
 from armreach_core.rl.learners import algo_class
 from armreach_core.rl.metrics import MeanStd, steps_to_goal
-from armreach_core.diagnostics.smoothness import jerk, mean_jerk
 
 
 @dataclass(frozen=True)

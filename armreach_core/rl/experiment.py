@@ -18,8 +18,8 @@ from typing import Any, TextIO
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.plugins.defaults import DEFAULT_BACKEND
 from armreach_core.errors import ConfigError
+from armreach_core.plugins.defaults import DEFAULT_BACKEND
 from armreach_core.rl import runs
 from armreach_core.rl.checkpoints import read_progress
 from armreach_core.rl.config import RunConfig, config_mismatch, extend, resolve_config

@@ -127,8 +127,8 @@ def _task_options() -> dict[str, list[str]]:
     """Keyword options of every registered task's constructor: option -> the tasks that take it."""
     import inspect
 
-    from armreach_core.plugins.lookup import task_spec
     from armreach_core.plugins.host import available_tasks
+    from armreach_core.plugins.lookup import task_spec
 
     options: dict[str, list[str]] = {}
     for name in available_tasks():

@@ -30,8 +30,8 @@ from typing import Any, TextIO
 
 import yaml
 
-from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_ROBOT, DEFAULT_TASK
 from armreach_core.errors import ArmReachError, ConfigError
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_ROBOT, DEFAULT_TASK
 
 #: What ``pip`` installs for sweeps and tuning.
 RAY_EXTRA = "pip install 'armreach[ray]'"

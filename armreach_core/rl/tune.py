@@ -23,8 +23,8 @@ from typing import Any
 
 import yaml
 
-from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_ROBOT, DEFAULT_TASK
 from armreach_core.errors import ArmReachError, ConfigError
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_ROBOT, DEFAULT_TASK
 from armreach_core.rl.sweep import ArmSpec, Trial, progress_callback, require_ray, run_trial, start_ray
 
 #: A key of the search space that is not a preset key: the width of both hidden layers.

@@ -110,7 +110,7 @@ def _geometry(robot: ArmKinematics) -> _Geometry:
     return _Geometry(points, grounded, frozenset(pairs))
 
 
-def ground_violations(robot: RobotModel, q: npt.ArrayLike, clearance: float = 0.0) -> dict[str, float]:
+def ground_violations(robot: ArmKinematics, q: npt.ArrayLike, clearance: float = 0.0) -> dict[str, float]:
     """Moving links whose collision geometry dips below ``clearance`` (m) at ``q``: link -> lowest z."""
     geometry = _geometry(robot)
     frames = robot.link_transforms(q)
@@ -172,7 +172,7 @@ def _overlap(a: tuple[FloatArray, FloatArray, FloatArray], b: tuple[FloatArray, 
     return True
 
 
-def self_collisions(robot: RobotModel, q: npt.ArrayLike) -> list[tuple[str, str]]:
+def self_collisions(robot: ArmKinematics, q: npt.ArrayLike) -> list[tuple[str, str]]:
     """Pairs of links that are not neighbours whose collision boxes overlap at ``q`` (one configuration)."""
     geometry = _geometry(robot)
     frames = robot.link_transforms(np.asarray(q, dtype=np.float64))

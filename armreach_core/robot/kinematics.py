@@ -491,9 +491,9 @@ class ArmKinematics:
             raise ValueError(f"joint vector has shape {arr.shape}, expected (..., {self.dof})")
         return arr
 
-    def _walk(self, q: FloatArray, joints: tuple[TreeJoint, ...], held: FloatArray | None = None) -> Iterator[
-        tuple[TreeJoint, FloatArray, FloatArray]
-    ]:
+    def _walk(
+        self, q: FloatArray, joints: tuple[TreeJoint, ...], held: FloatArray | None = None
+    ) -> Iterator[tuple[TreeJoint, FloatArray, FloatArray]]:
         """The one forward-kinematics implementation: per joint of ``joints`` (parents first,
         each parent link reached by an earlier one or the root), its frame and its child
         link's transform in the world, for joint vectors ``q`` (..., dof).

@@ -5,8 +5,8 @@ from __future__ import annotations
 import os
 from typing import Any
 
-from armreach_core.plugins.defaults import DEFAULT_BACKEND
 from armreach_core.env import ArmEnv
+from armreach_core.plugins.defaults import DEFAULT_BACKEND
 from armreach_core.tasks.reach.task import ReachTask
 
 _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).

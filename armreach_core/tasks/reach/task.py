@@ -27,8 +27,8 @@ from gymnasium import spaces
 from armreach_core.backend import ArmState
 from armreach_core.errors import ConfigError, URDFError
 from armreach_core.robot.model import FloatArray, RobotModel
-from armreach_core.task import Component, Demonstrator, GoalArray, ObservationLayout, Scene, Task, goal_distance
 from armreach_core.robot.workspace import TargetSampler, reachability_map
+from armreach_core.task import Component, Demonstrator, GoalArray, ObservationLayout, Scene, Task, goal_distance
 
 TARGET_MARKER = "target"
 #: How far (rad or m) the observed joint angles may pass the joint limits: an engine with soft

@@ -6,7 +6,6 @@ from armreach_core.plugins.hookspecs import hookimpl
 from armreach_core.plugins.specs import BackendSpec, Register
 
 
-
 @hookimpl
 def armreach_register_backends(register: Register) -> None:
     register(

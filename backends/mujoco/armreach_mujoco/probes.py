@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from armreach_core.backend import Backend
-from armreach_core.robot.model import FloatArray
 from armreach_core.plugins.specs import BackendProbes
+from armreach_core.robot.model import FloatArray
 from armreach_mujoco.backend import MuJoCoBackend
 from armreach_mujoco.engine import mujoco
 from armreach_mujoco.servo import Motors

@@ -6,8 +6,8 @@ import numpy as np
 import pybullet as pb
 
 from armreach_core.backend import Backend
-from armreach_core.robot.model import FloatArray
 from armreach_core.plugins.specs import BackendProbes
+from armreach_core.robot.model import FloatArray
 from armreach_pybullet.backend import MAX_CLIENTS, PyBulletBackend
 
 

@@ -24,7 +24,6 @@ def presets() -> tuple[Path, ...]:
     return tuple(Path(str(folder.joinpath(name))) for name in ("grasp.yaml",))
 
 
-
 @hookimpl
 def armreach_register_tasks(register: Register) -> None:
     register(

@@ -6,7 +6,6 @@ from armreach_core import TaskSpec, hookimpl
 from armreach_core.plugins.specs import Register
 
 
-
 @hookimpl
 def armreach_register_tasks(register: Register) -> None:
     register(
