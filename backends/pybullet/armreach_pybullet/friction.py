@@ -22,7 +22,7 @@ servo overcomes the friction anyway, as a real servo with that much torque would
 
 from __future__ import annotations
 
-import pybullet as pb
+from armreach_pybullet.engine import pb
 
 #: Where the anchor body sits (m): far from the scene.
 ANCHOR_POSITION = (0.0, 0.0, -1.0e4)

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
-import pybullet as pb
 
 from armreach_core.backend import Backend
 from armreach_core.plugins.specs import BackendProbes
 from armreach_core.robot.model import FloatArray
-from armreach_pybullet.backend import MAX_CLIENTS, PyBulletBackend
+from armreach_pybullet.backend import PyBulletBackend
+from armreach_pybullet.engine import MAX_CLIENTS, pb
 
 
 def live_clients() -> int:

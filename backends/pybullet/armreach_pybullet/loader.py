@@ -1,0 +1,95 @@
+"""The world a backend starts from: the physics settings, the ground, and the arm loaded from its URDF."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+
+from armreach_core.backend import PhysicsConfig
+from armreach_core.errors import URDFError
+from armreach_core.robot.hulls import simulation_urdf
+from armreach_core.robot.model import RobotModel
+from armreach_pybullet.engine import engine_output_to_log, pb
+
+#: Sweeps of Bullet's projected Gauss-Seidel solver per physics step (PyBullet's default is 50).
+#: Bullet stops once the solution stops changing, so an arm in free space usually needs far
+#: fewer; 50 left the motors of an arm with aligned joint axes (xArm7) and links pressed on the
+#: ground (Kinova, SO-101) up to 3 cm from the solution, an error of the solver rather than of
+#: the physics. 200 comes within 1-3 mm of 1,000 (docs/mujoco-backend.md, "Solver").
+SOLVER_ITERATIONS = 200
+GROUND_RGBA = (0.86, 0.87, 0.89, 1.0)
+#: Mesh formats PyBullet's URDF loader reads.
+PYBULLET_MESHES = (".obj", ".stl", ".dae")
+
+#: A body's base pose as PyBullet takes it: position, quaternion (x, y, z, w).
+Pose = tuple[list[float], list[float]]
+
+
+def load_failure(robot: RobotModel, detail: str) -> str:
+    """Why PyBullet refused a URDF that armreach's own parser accepted, and what to do."""
+    from lxml import etree
+
+    root = etree.fromstring(robot.parsed.resolved_xml)
+    unreadable = sorted(
+        {m.get("filename", "") for m in root.iter("mesh") if os.path.splitext(m.get("filename", ""))[1].lower()
+         not in PYBULLET_MESHES}
+    )  # fmt: skip
+    hint = (
+        f"PyBullet reads only {', '.join(PYBULLET_MESHES)} meshes and this URDF uses {', '.join(unreadable)}: "
+        "convert them (e.g. with trimesh) and point the URDF at the copies"
+        if unreadable
+        else "check the URDF with PyBullet's own loader for the details"
+    )
+    return f"PyBullet cannot load {robot.urdf_path} ({detail}); {hint}"
+
+
+def build_world(cid: int, physics: PhysicsConfig) -> None:
+    """Gravity, time step and solver sweeps of client ``cid``, and the ground when ``physics`` has one."""
+    pb.setGravity(*physics.gravity, physicsClientId=cid)
+    pb.setTimeStep(physics.timestep, physicsClientId=cid)
+    pb.setPhysicsEngineParameter(numSolverIterations=SOLVER_ITERATIONS, physicsClientId=cid)
+    if physics.ground:
+        shape = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=cid)
+        visual = pb.createVisualShape(
+            pb.GEOM_BOX, halfExtents=[1.5, 1.5, 0.001], rgbaColor=GROUND_RGBA, physicsClientId=cid
+        )
+        pb.createMultiBody(0.0, shape, visual, basePosition=[0, 0, 0], physicsClientId=cid)
+
+
+def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int, Pose]:
+    """Load ``robot`` into client ``cid`` at its base pose, with a fixed base: its body id and that pose.
+
+    Raises:
+        URDFError: PyBullet refused the URDF (the client is then disconnected).
+    """
+    flags = 0
+    if physics.inertia_from_file:
+        flags |= pb.URDF_USE_INERTIA_FROM_FILE
+    if physics.self_collision:
+        flags |= pb.URDF_USE_SELF_COLLISION | pb.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT
+    w, x, y, z = robot.base_orientation
+    base_pose = (list(robot.base_position), [x, y, z, w])  # PyBullet's quaternions are (x, y, z, w)
+    with tempfile.TemporaryDirectory(prefix="armreach-") as tmp:
+        path = os.path.join(tmp, "robot.urdf")
+        with open(path, "wb") as handle:
+            handle.write(simulation_urdf(robot, visuals=physics.visuals))
+        try:
+            with engine_output_to_log():
+                body = pb.loadURDF(
+                    path,
+                    basePosition=base_pose[0],
+                    baseOrientation=base_pose[1],
+                    useFixedBase=True,
+                    flags=flags,
+                    physicsClientId=cid,
+                )
+        except pb.error as exc:
+            pb.disconnect(physicsClientId=cid)
+            raise URDFError(load_failure(robot, str(exc))) from None
+    if body < 0:
+        pb.disconnect(physicsClientId=cid)
+        raise URDFError(load_failure(robot, "loadURDF returned no body"))
+    return int(body), base_pose
+
+
+__all__ = ["GROUND_RGBA", "PYBULLET_MESHES", "SOLVER_ITERATIONS", "Pose", "build_world", "load_failure", "load_robot"]
