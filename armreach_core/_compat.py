@@ -74,4 +74,4 @@ class _MovedFinder(importlib.abc.MetaPathFinder):
 def install() -> None:
     """Make the old paths importable (once)."""
     if not any(isinstance(finder, _MovedFinder) for finder in sys.meta_path):
-        sys.meta_path.append(_MovedFinder())
+        sys.meta_path.insert(0, _MovedFinder())  # before the path finder, which would load a second copy

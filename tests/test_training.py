@@ -486,7 +486,7 @@ def test_a_run_folder_in_todays_format_reads_back_evaluates_and_resumes(tmp_path
     assert main([*command, "--out", str(run_dir)]) == 0
     todays = TODAYS_CONFIG.format(preset=Path(tiny).resolve())
     # the format has not changed; runs now record their learner
-    assert (run_dir / "config.yaml").read_text() == todays + "  learner: sb3\n"
+    assert (run_dir / "config.yaml").read_text() == todays + "  learner: sb3\narm: {}\n"
     # A run written before learners existed is an SB3 run.
     # A key this version does not know (a newer version's, or a note by hand) is kept and otherwise ignored.
     (run_dir / "config.yaml").write_text(todays + "note: by hand\n")

@@ -210,11 +210,13 @@ class PluginHost:
                     f"expected {expected.__name__}"
                 )
             check_name(kind, spec.name)
-            if isinstance(spec, TaskSpec) and not _ENV_ID.match(spec.env_id):
-                raise PluginError(
-                    f"task {spec.name!r} of plugin {owner!r} has env id {spec.env_id!r}; "
-                    "use the form 'armreach/Name-vN'"
-                )
+            if isinstance(spec, TaskSpec):
+                for env_id in (spec.env_id, *spec.deprecated_ids):
+                    if not _ENV_ID.match(env_id):
+                        raise PluginError(
+                            f"task {spec.name!r} of plugin {owner!r} has env id {env_id!r}; "
+                            "use the form 'armreach/Name-vN'"
+                        )
             table = registry.table(kind)
             if spec.name in table:
                 first = registry.owners[(kind, spec.name)]
@@ -224,9 +226,9 @@ class PluginHost:
                 )
             if isinstance(spec, TaskSpec):
                 for other in registry.tasks.values():
-                    if other.env_id == spec.env_id:
+                    for env_id in {spec.env_id, *spec.deprecated_ids} & {other.env_id, *other.deprecated_ids}:
                         raise PluginError(
-                            f"env id {spec.env_id!r} is registered twice: by task {other.name!r} and by "
+                            f"env id {env_id!r} is registered twice: by task {other.name!r} and by "
                             f"task {spec.name!r} of plugin {owner!r}"
                         )
             table[spec.name] = spec

@@ -120,8 +120,9 @@ class TaskSpec:
             without ``.yaml``, after armreach's own).
         zoo_hyperparams: the task's rl-baselines3-zoo hyperparameter file, keyed by env id
             (:mod:`armreach_core.rl.zoo` gathers every task's), or ``None``.
-        deprecated_ids: older ids of the env that stay registered, each warning that it is
-            deprecated and naming ``env_id`` (Gymnasium's way: ``Reacher-v4`` beside ``-v5``).
+        deprecated_ids: older ids of the env that stay registered, each with the env keyword
+            arguments that give its old behaviour; making one warns that it is deprecated and
+            names ``env_id`` (Gymnasium's way: ``Reacher-v4`` stays beside ``Reacher-v5``).
     """
 
     name: str
@@ -134,7 +135,7 @@ class TaskSpec:
     description: str = ""
     presets: tuple[Path, ...] = ()
     zoo_hyperparams: Path | None = None
-    deprecated_ids: tuple[str, ...] = ()
+    deprecated_ids: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
 
     def task_class(self) -> type[Task]:
         """The Task subclass."""

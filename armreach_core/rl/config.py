@@ -15,6 +15,9 @@ Reading a ``config.yaml``:
 * any other top-level key (written by a newer armreach, or by hand) is kept in
   :attr:`RunConfig.extra` and written back unchanged when the run is resumed; it is
   otherwise ignored and never changes what is trained or evaluated;
+* ``arm`` is the arm as one :class:`~armreach_core.robot.spec.ArmSpec` record (URDF, end
+  effector, home, base placement): written for readers, derived from ``urdf``, ``ee_link``
+  and the env settings, and not read back (:attr:`RunConfig.arm` derives it again);
 * ``settings`` (the preset's settings for the algorithm, SB3's keyword arguments and
   the env's) are taken as recorded: they were checked against the preset schema when
   the run was made. :meth:`RunConfig.with_settings` checks what it changes.
@@ -31,6 +34,7 @@ from typing import Any
 
 from armreach_core.errors import ConfigError
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
+from armreach_core.robot.spec import ArmSpec
 from armreach_core.rl.learners import LEGACY_LEARNER, check_learner, check_settings, default_learner
 from armreach_core.rl.presets import ALGOS, OFF_POLICY, RL_ALGOS, load_preset, validate_settings
 
@@ -56,6 +60,8 @@ KEYS = (
     "eval_max_episode_steps",
     "settings",
 )
+#: Keys written for readers, derived from the others and not read back.
+DERIVED = ("arm",)
 #: Keys a ``config.yaml`` must have; the others have defaults.
 REQUIRED = ("algo", "task", "backend", "preset", "seed", "timesteps", "n_envs", "settings")
 #: Keys that define what a run is: two runs that agree on them (and on their settings) are the same run.
@@ -148,7 +154,7 @@ class RunConfig:
             names = ", ".join(repr(key) for key in missing)
             raise ConfigError(f"{source} is not a complete armreach run config: missing required key(s) {names}")
         known = {key: data[key] for key in KEYS if key in data}
-        extra = {key: value for key, value in data.items() if key not in KEYS}
+        extra = {key: value for key, value in data.items() if key not in KEYS and key not in DERIVED}
         try:
             return cls(**known, extra=extra)
         except ConfigError as exc:
@@ -158,8 +164,21 @@ class RunConfig:
         """The mapping ``config.yaml`` holds: :data:`KEYS` in order, then the extra keys, all plain values."""
         out: dict[str, Any] = {key: getattr(self, key) for key in KEYS}
         out["settings"] = copy.deepcopy(dict(self.settings))
+        out["arm"] = self.arm.to_dict()
         out.update(copy.deepcopy(dict(self.extra)))
         return out
+
+    @property
+    def arm(self) -> ArmSpec:
+        """The arm the run trains (``urdf`` unset: the task's registered robot)."""
+        env = self.settings.get("env") or {}
+        return ArmSpec.create(
+            self.urdf,
+            self.ee_link,
+            env.get("home"),
+            base_position=env.get("base_position"),
+            base_orientation=env.get("base_orientation"),
+        )
 
     def with_settings(self, **changes: Any) -> RunConfig:
         """A copy with ``changes`` made to the settings, each checked against the preset schema."""
