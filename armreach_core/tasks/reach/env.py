@@ -11,6 +11,15 @@ from armreach_core.tasks.reach.task import ReachTask
 
 _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
 
+    ## Description
+
+    A serial arm, the bundled UR5-class ``ar6`` or any arm given by its URDF, must bring its
+    end effector within 5 cm of a target drawn at random in a ball in front of it, by
+    moving its joints in small position steps. The physics engine is a plugin (PyBullet by
+    default, MuJoCo built from the same URDF); gravity and a ground plane are on,
+    self-collision is off unless ``self_collision=True`` (parent/child pairs excluded), and
+    inertias come from the URDF (``inertia_from_file=True``).
+
     Made with ``gym.make("armreach/Reach-v0", backend="pybullet", urdf=None,
     ee_link=None, render_mode=None)`` after ``import armreach_core``, or by calling this
     class with the same keyword arguments.
@@ -45,9 +54,12 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
 
     ## Rewards
 
-    ``r = -d³ + 10 · [d < 0.05]`` where ``d`` is the end-effector-to-target distance in
-    metres. ``info`` holds ``distance``, ``is_success``, ``reward_distance`` (−d³),
-    ``reward_success`` and ``joint_limit_violation``.
+    ``r = -d**p + success_bonus · [d < success_threshold]``, where ``d`` is the
+    end-effector-to-target distance in metres; by default ``p = 3`` and the bonus is 10 for
+    ``d < 0.05``: ``r = -d³ + 10 · [d < 0.05]``, the paper's reward. A step whose joint
+    target left the limits also costs ``joint_limit_penalty`` (default 0). ``info`` holds
+    ``distance``, ``is_success``, ``reward_distance`` (−dᵖ), ``reward_success`` and
+    ``joint_limit_violation``.
 
     ## Starting state
 
@@ -55,7 +67,8 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     another URDF: chosen from the URDF, clear of the ground, see ``armreach_core.robot.home``; joints
     off the arm's chain are reset to their hold positions). The target is
     uniform in a ball of radius ``target_radius`` centred at ``target_center`` (ar6: 0.5 m around
-    (0.45, 0, 0.45) m; another arm: half its reach ``R`` around ``(R/2, 0, R/2)`` from its base), keeping only points at least ``min_target_height`` (0.05 m) above
+    (0.45, 0, 0.45) m; another arm: half its reach ``R`` around the point ``R/2`` forward and
+    ``R/2`` up from its base), keeping only points at least ``min_target_height`` (0.05 m) above
     the ground and inside the arm's reachable set computed from the URDF. All
     randomness comes from the env's generator (``reset(seed=...)``).
 
@@ -71,33 +84,26 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
       ``gym.make(id, max_episode_steps=N)`` sets another), the env itself when this class
       is constructed directly (``max_episode_steps=N``).
 
-    ## Physics
-
-    Gravity on, contacts with a ground plane on, self-collision off
-    (``self_collision=True`` turns it on, parent/child pairs excluded), inertia from the
-    URDF (``inertia_from_file=True``).
-
     ## Arguments
 
-    See :class:`~armreach_core.env.ArmEnv`; the reach task adds ``success_threshold``,
-    ``success_bonus``, ``target_radius``, ``target_center``, ``min_target_height`` and
-    ``goal_conditioned``.
+    The arm, the backend and the physics: see :class:`~armreach_core.env.ArmEnv`
+    (``backend``, ``urdf``, ``robot``, ``ee_link``, ``home``, ``render_mode``,
+    ``max_joint_step``, ``timestep``, ``substeps``, ``max_episode_steps``,
+    ``joint_limit_mode``, ``joint_limit_penalty``, ...). The reach task adds:
+
+    | argument | default | meaning |
+    |---|---|---|
+    | ``success_threshold`` | 0.05 | success distance (m) |
+    | ``success_bonus`` | 10 | reward added on success |
+    | ``distance_exponent`` | 3 | ``p`` of the distance term ``-d**p`` (1 trains faster) |
+    | ``target_radius`` | the robot's (ar6: 0.5), else half the reach | radius of the target ball (m) |
+    | ``target_center`` | the robot's (ar6: (0.45, 0, 0.45)), else as above | centre of the ball (m, world frame) |
+    | ``min_target_height`` | 0.05 | lowest target height (m) |
+    | ``goal_conditioned`` | ``False`` | a ``Dict`` observation for HER |
 
     ## Version history
 
-    * v0: initial version (the paper's env with the joint-limit rule made optional).
-      Kept as v0 (its id is public API) through these changes, none of which changes the
-      bundled arm's seeded trajectories: the observed joint angles' bounds widened by
-      0.05 rad (MuJoCo's soft limits overshoot slightly); positions in the world frame
-      (the same as the base frame unless ``base_position``/``base_orientation`` are given);
-      for a ``urdf`` without a given ``home``, the start pose chosen clear of the ground;
-      joints off the chain held; truncation owned by Gymnasium's ``TimeLimit``; for a
-      ``urdf``, the target ball's radius half the arm's reach (it was 0.5 m for every arm).
-      Numerical changes of the engines, kept as v0 too: PyBullet's solver runs up to 200
-      sweeps (was 50) and, on both engines, a joint too light for its URDF damping
-      (``dt D / M_ii > 1``) gets ``D = M_ii / dt``; MuJoCo's friction cone is elliptic and
-      its joint limits take its contacts' time constant. The bundled arm's seeded observations move
-      by at most 1e-4 until it touches the ground.
+    Version history: see CHANGELOG.md.
     """
 
 
