@@ -6,9 +6,10 @@ buffers, evaluation) does not care which one trained a run. The learner is a pre
 (``learner: sbx``) and a ``--learner`` flag; a run's ``config.yaml`` records it, and a run
 without one (written before learners existed) is an SB3 run.
 
-Off-policy runs default to SBX: at the paper's settings on 2 cores it trains DDPG, TD3 and
-SAC 1.3-1.8 times as fast as SB3 (``armreach bench --learners sb3,sbx``, figures in
-docs/learning.md); PPO stays on SB3, which is faster there (its cost is the rollout).
+Off-policy runs default to SBX, which trains DDPG, TD3 and SAC faster than SB3 at the
+paper's settings; PPO stays on SB3, which is faster there (its cost is the rollout).
+``armreach bench --learners sb3,sbx`` measures both; the figures and the command are in
+docs/learning.md ("Learners side by side").
 """
 
 from __future__ import annotations

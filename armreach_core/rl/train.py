@@ -73,9 +73,9 @@ def _load_checkpoint(config: RunConfig, run_dir: Path, env: Any, trust: bool) ->
 def configure_threads(torch_threads: int, device: str) -> int:
     """Set torch's (and XLA's) CPU threads: ``torch_threads`` (a preset's), else (0) 1 when training on the CPU.
 
-    One thread is the measured default: with two, PyTorch's OpenMP workers fight the
-    physics engine for the cores; SB3 DDPG on PyBullet ran at 3.8 env steps/s with
-    torch's default of 2 threads on a 2-core machine and at 74 with 1 (``armreach bench``).
+    One thread is the measured default: with more, PyTorch's OpenMP workers fight the
+    physics engine for the cores, and SB3's DDPG on PyBullet slowed down many times over
+    on a 2-core machine (figures and command: docs/benchmarks.md, "Training throughput").
     """
     import torch
 

@@ -2,16 +2,15 @@
 
 Both engines collide a mesh through its convex hull (MuJoCo always; PyBullet for a moving
 link), so handing them the hull instead of a detailed scan changes no contact, while it
-spares each PyBullet env the detailed mesh: SO-101's per-env memory fell from 169 MB to
-61 MB, together with loading visual meshes only in envs that render (measured with
-``armreach robot``, docs/arms.md). A mesh file with several parts gets one hull over all
-of them, as MuJoCo builds it.
+spares each PyBullet env the memory of the detailed mesh (with visual meshes loaded only in
+envs that render; per-arm figures and the command in docs/arms.md). A mesh file with
+several parts gets one hull over all of them, as MuJoCo builds it.
 
-A hull of a finely tessellated part keeps thousands of vertices (SO-101's: up to 4,880,
-Z1's gripper 6,877), and Bullet's convex collision walks all of them every physics step.
-So the hull is simplified to the fewest of its own vertices (taken farthest-first) whose
-hull leaves no vertex of the full one more than :data:`HULL_TOLERANCE` outside: SO-101's
-parts keep 48-243 vertices, and the collision shape shrinks by at most a millimetre.
+A hull of a finely tessellated part keeps thousands of vertices, and Bullet's convex
+collision walks all of them every physics step. So the hull is simplified to the fewest of
+its own vertices (taken farthest-first) whose hull leaves no vertex of the full one more
+than :data:`HULL_TOLERANCE` outside: a few hundred vertices at most on the corpus arms, and
+the collision shape shrinks by at most :data:`HULL_TOLERANCE` (docs/arms.md has the counts).
 
 Hulls live in ``$XDG_CACHE_HOME/armreach/hulls`` (default ``~/.cache``), keyed by the
 mesh's path, size and modification time; a file trimesh cannot read, or one whose hull is
