@@ -8,9 +8,13 @@ URDF is. An arm whose package is not installed is reported as missing, never dow
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
+from typing import TypeVar
+
+T = TypeVar("T")
 
 #: Where each source keeps its files, and how to install it.
 SOURCES = {
@@ -82,3 +86,19 @@ def corpus_arm(name: str) -> CorpusArm:
         if arm.name == name:
             return arm
     raise ConfigError(f"no corpus arm {name!r}; the corpus has {', '.join(a.name for a in CORPUS)}")
+
+
+def for_each_corpus_arm(run: Callable[[CorpusArm, Path], T], *, log: Callable[[str], None] = print) -> dict[str, T]:
+    """``run(arm, urdf)`` on every installed corpus arm, in corpus order: the results by arm name.
+
+    An arm whose package is not installed is skipped, with a line to ``log`` that says how
+    to install it.
+    """
+    results: dict[str, T] = {}
+    for arm in CORPUS:
+        path = arm.path
+        if path is None:
+            log(f"{arm.name}: not installed ({arm.install})")
+            continue
+        results[arm.name] = run(arm, path)
+    return results
