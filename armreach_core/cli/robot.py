@@ -26,13 +26,14 @@ def add_parser(sub: Any) -> None:
     parser.add_argument(
         "--corpus",
         action="store_true",
-        help="check every installed arm of the corpus (armreach_core/corpus.py) instead",
+        help="check every installed arm of the corpus (armreach_core/diagnostics/corpus.py) instead",
     )
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from armreach_core.diagnostics.robot_report import inspect_robot, markdown, picture
+    from armreach_core.diagnostics.robot_page import markdown, save_robot
+    from armreach_core.diagnostics.robot_report import inspect_robot
 
     if args.corpus:
         return _corpus(args)
@@ -46,13 +47,7 @@ def run(args: argparse.Namespace) -> int:
         parity_steps=args.parity_steps,
     )
     out: Path = args.out or Path("runs") / time.strftime("robot-%Y%m%d-%H%M%S")
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "robot.json").write_text(json.dumps(report.to_json(), indent=1, default=str) + "\n")
-    (out / "robot.md").write_text(markdown(report) + "\n")
-    saved = [out / "robot.md", out / "robot.json"]
-    if report.usable and report.engines and report.engines[0].error is None:
-        picture({"urdf": args.urdf, **kwargs}, report.engines[0].backend, out / "robot.png")
-        saved.append(out / "robot.png")
+    saved = save_robot(report, out, {"urdf": args.urdf, **kwargs})
     print(json.dumps(report.to_json(), indent=1, default=str) if args.json else markdown(report))
     print("saved " + ", ".join(str(p) for p in saved))
     return 0 if report.usable else 1
@@ -60,32 +55,19 @@ def run(args: argparse.Namespace) -> int:
 
 def _corpus(args: argparse.Namespace) -> int:
     """One line per corpus arm: home clearance, determinism, memory, steps/s and IK success per engine."""
-    from armreach_core.diagnostics.corpus import CORPUS
-    from armreach_core.diagnostics.robot_report import corpus_table, inspect_robot
+    from armreach_core.diagnostics.robot_page import save_corpus
+    from armreach_core.diagnostics.robot_report import inspect_corpus
 
     out: Path = args.out or Path("runs") / time.strftime("robot-corpus-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
-    reports = {}
-    for arm in CORPUS:
-        if arm.path is None:
-            print(f"{arm.name}: not installed ({arm.install})")
-            continue
-        started = time.perf_counter()
-        reports[arm.name] = inspect_robot(
-            str(arm.path),
-            env_kwargs=robot_kwargs(args),
-            backends=args.backends,
-            steps=args.steps,
-            ik_episodes=args.ik_episodes,
-            parity_steps=args.parity_steps,
-        )
-        verdict = "usable" if reports[arm.name].usable else "NOT usable"
-        print(f"{arm.name}: {verdict} ({time.perf_counter() - started:.0f} s)")
-    table = corpus_table(reports)
-    (out / "corpus.md").write_text(table)
-    (out / "corpus.json").write_text(
-        json.dumps({name: r.to_json() for name, r in reports.items()}, indent=1, default=str) + "\n"
+    reports = inspect_corpus(
+        env_kwargs=robot_kwargs(args),
+        backends=args.backends,
+        steps=args.steps,
+        ik_episodes=args.ik_episodes,
+        parity_steps=args.parity_steps,
     )
+    table, saved = save_corpus(reports, out)
     print(table)
-    print(f"saved {out / 'corpus.md'} and {out / 'corpus.json'}")
+    print(f"saved {saved[0]} and {saved[1]}")
     return 0 if all(r.usable for r in reports.values()) else 1

@@ -5,14 +5,15 @@ limits, the joints off the chain that are held, the end effector, the home pose 
 ground clearance and dexterity, the reach and the reachable target volume, per installed
 backend the memory and step cost of an env and whether ``reset(seed)`` is deterministic,
 a short parity summary, the inverse-kinematics reference's success on sampled targets,
-and a picture of the arm at home with the target region.
+and a picture of the arm at home with the target region. This module measures; the page
+and its files are written by :mod:`armreach_core.diagnostics.robot_page`.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from armreach_core.backend import Camera
+from armreach_core.diagnostics.corpus import CorpusArm, for_each_corpus_arm
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ArmReachError
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
@@ -296,81 +298,31 @@ def inspect_robot(
     return report
 
 
-def markdown(report: RobotReport) -> str:
-    lines = [f"# {report.name or report.urdf}", "", f"URDF: `{report.urdf}`", ""]
-    if report.problems:
-        lines += ["**Cannot be used as it is:**", ""] + [f"- {p}" for p in report.problems] + [""]
-    else:
-        lines += ["**Usable.**", ""]
-    if report.joints:
-        lines += ["| joint | type | lower | upper | effort | velocity | home |", "|---|---|---|---|---|---|---|"]
-        for joint, home in zip(report.joints, report.home, strict=False):
-            lines.append(
-                f"| {joint['name']} | {joint['type']} | {joint['lower']:.3f} | {joint['upper']:.3f} | "
-                f"{joint['effort']:g} | {joint['velocity']:g} | {home:.3f} |"
-            )
-        lines += [
-            "",
-            f"- end effector: `{report.ee_link}`",
-            f"- joints off the chain, held: {', '.join(report.held_joints) or 'none'}",
-            f"- home: lowest link {report.home_lowest_m:+.3f} m above the ground, dexterity {report.home_dexterity:.3f}"
-            f" m/rad, self-collisions: {report.home_self_collisions or 'none'}",
-            f"- reach {report.reach_m:.3f} m; targets in a ball of {report.target_radius_m:.2f} m around "
-            f"{np.round(report.target_center, 3).tolist()}: {report.target_volume_m3 * 1e3:.1f} litres reachable",
-            "",
-        ]
-    if report.engines:
-        lines += [
-            "| backend | memory per env (first env) | creation (again) | steps/s | deterministic "
-            "| IK success (steps) |",
-            "|---|---|---|---|---|---|",
-        ]
-        for f in report.engines:
-            if f.error is not None:
-                lines.append(f"| {f.backend} | not installed | | | | |")
-                continue
-            lines.append(
-                f"| {f.backend} | {f.env_mb:.1f} MB ({f.first_env_mb:.1f}) | {f.cached_create_ms:.1f} ms "
-                f"({f.create_ms:.0f}) | {f.steps_per_s:,.0f} | {'yes' if f.deterministic else 'NO'} | "
-                f"{f.ik_success:.0%} ({f.ik_steps:.1f}) |"
-            )
-        lines.append("")
-    if report.parity:
-        lines += ["Parity (end-effector RMS gap in free space, and from the first contact on):", ""]
-        for key, gap in report.parity["gaps"].items():
-            free = "-" if gap["free_ee_rms_mm"] is None else f"{gap['free_ee_rms_mm']:.2f} mm"
-            text = f"- {key}: {free} in free space"
-            if gap["contact_step"] is not None:
-                text += f"; {gap['contact_ee_rms_mm']:.1f} mm from step {gap['contact_step']}"
-            lines.append(text)
-        lines.append("")
-    if report.warnings:
-        lines += ["Warnings:", ""] + [f"- {w}" for w in report.warnings] + [""]
-    return "\n".join(lines)
+def inspect_corpus(
+    *,
+    env_kwargs: Mapping[str, Any] | None = None,
+    backends: Sequence[str] | None = None,
+    steps: int = 500,
+    ik_episodes: int = 20,
+    parity_steps: int = 100,
+    seed: int = 0,
+    log: Callable[[str], None] = print,
+) -> dict[str, RobotReport]:
+    """:func:`inspect_robot` on every installed corpus arm, by arm name; a line per arm goes to ``log``."""
 
+    def one(arm: CorpusArm, urdf: Path) -> RobotReport:
+        started = time.perf_counter()
+        report = inspect_robot(
+            str(urdf),
+            env_kwargs=env_kwargs,
+            backends=backends,
+            steps=steps,
+            ik_episodes=ik_episodes,
+            parity_steps=parity_steps,
+            seed=seed,
+        )
+        verdict = "usable" if report.usable else "NOT usable"
+        log(f"{arm.name}: {verdict} ({time.perf_counter() - started:.0f} s)")
+        return report
 
-def corpus_table(reports: Mapping[str, RobotReport]) -> str:
-    """A markdown table, one row per arm and backend."""
-    lines = [
-        "| arm | end effector | held joints | home clearance | backend | deterministic | memory per env (first) "
-        "| steps/s | creation (again) | IK success |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for name, report in reports.items():
-        if not report.engines:
-            lines.append(f"| {name} | – | – | – | – | – | – | – | – | {'; '.join(report.problems)} |")
-            continue
-        for f in report.engines:
-            head = (
-                f"| {name} | `{report.ee_link}` | {len(report.held_joints)} | {report.home_lowest_m * 100:.1f} cm"
-                if f is report.engines[0]
-                else "| | | | "
-            )
-            if f.error is not None:
-                lines.append(f"{head} | {f.backend} | not installed | | | | |")
-                continue
-            lines.append(
-                f"{head} | {f.backend} | {'yes' if f.deterministic else 'NO'} | {f.env_mb:.0f} MB "
-                f"({f.first_env_mb:.0f}) | {f.steps_per_s:,.0f} | {f.cached_create_ms:.1f} ms | {f.ik_success:.0%} |"
-            )
-    return "\n".join(lines) + "\n"
+    return for_each_corpus_arm(one, log=log)
