@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
@@ -32,11 +31,11 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from armreach_core.diagnostics.bench import check_backends, run_bench, to_json, to_markdown
+    from armreach_core.diagnostics.bench import check_backends, run_bench, save, to_markdown
+    from armreach_core.diagnostics.installed import installed_backends
     from armreach_core.errors import ConfigError
-    from armreach_core.plugins.host import available_backends
 
-    backends = args.backends or [b for b in available_backends() if _importable(b)]
+    backends = args.backends or installed_backends()
     check_backends(backends)
     from armreach_core.rl.learners import ALGORITHMS, LEARNERS
 
@@ -69,22 +68,8 @@ def run(args: argparse.Namespace) -> int:
         learners=learners,
         env_kwargs=robot_kwargs(args),
     )
-    table = to_markdown(results)
-    print(table)
+    print(to_markdown(results))
     if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "bench.json").write_text(json.dumps(to_json(results), indent=2) + "\n")
-        (args.out / "bench.md").write_text(table)
-        print(f"saved {args.out / 'bench.json'} and {args.out / 'bench.md'}")
+        saved = save(results, args.out)
+        print(f"saved {saved[0]} and {saved[1]}")
     return 0
-
-
-def _importable(backend: str) -> bool:
-    from armreach_core.errors import BackendUnavailableError
-    from armreach_core.plugins.lookup import load_backend_class
-
-    try:
-        load_backend_class(backend)
-    except BackendUnavailableError:
-        return False
-    return True

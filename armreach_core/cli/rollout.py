@@ -3,17 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
-from armreach_core.env import ArmEnv
-from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
-from armreach_core.robot.ik import RESTARTS, IKPolicy
+from armreach_core.plugins.defaults import DEFAULT_BACKEND
 
 
 def add_parser(sub: Any) -> None:
@@ -31,57 +26,23 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from armreach_core.diagnostics.rollout import rollout, save_rollout
+
     out = args.out or Path("runs") / time.strftime("rollout-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
-    env = ArmEnv(
-        DEFAULT_TASK,
-        backend=args.backend,
-        render_mode="human" if args.viewer else "rgb_array",
-        **robot_kwargs(args),
-        max_episode_steps=args.max_steps,
+    result = rollout(
+        args.backend,
+        policy=args.policy,
+        seed=args.seed,
+        max_steps=args.max_steps,
+        viewer=args.viewer,
+        env_kwargs=robot_kwargs(args),
     )
-    try:
-        _, info = env.reset(seed=args.seed)
-        env.action_space.seed(args.seed)
-        policy = IKPolicy(env.robot, env.max_joint_step, restarts=RESTARTS)
-        frames = [env.backend.render(env.camera)]
-        steps, total = 0, 0.0
-        while True:
-            if args.policy == "ik":
-                action = policy.act(env.backend.joint_state()[0], env.task.target)  # type: ignore[attr-defined]
-            else:
-                action = env.action_space.sample()
-            _, reward, terminated, truncated, info = env.step(action)
-            steps += 1
-            total += float(reward)
-            if steps % 25 == 0:
-                frames.append(env.backend.render(env.camera))
-            if terminated or truncated:
-                break
-        frames.append(env.backend.render(env.camera))
-    finally:
-        env.close()
-    picks = [frames[i] for i in np.linspace(0, len(frames) - 1, num=min(4, len(frames))).round().astype(int)]
-    _save_png(np.concatenate([f for f in picks if f is not None], axis=1), out / "rollout.png")
-    summary = {
-        "backend": args.backend,
-        "policy": args.policy,
-        "seed": args.seed,
-        "steps": steps,
-        "is_success": bool(info["is_success"]),
-        "distance_m": float(info["distance"]),
-        "return": total,
-    }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    png, summary_json = save_rollout(result, out)
+    summary = result.summary
     print(
-        f"{'success' if summary['is_success'] else 'no success'} after {steps} steps: "
-        f"distance {summary['distance_m'] * 100:.1f} cm, return {total:.2f}"
+        f"{'success' if summary['is_success'] else 'no success'} after {summary['steps']} steps: "
+        f"distance {summary['distance_m'] * 100:.1f} cm, return {summary['return']:.2f}"
     )
-    print(f"saved {out / 'rollout.png'} and {out / 'summary.json'}")
+    print(f"saved {png} and {summary_json}")
     return 0
-
-
-def _save_png(image: np.ndarray[Any, Any], path: Path) -> None:
-    from PIL import Image
-
-    Image.fromarray(image).save(path)

@@ -22,13 +22,13 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from armreach_core.diagnostics.installed import installed_backends
     from armreach_core.diagnostics.soak import Bounds, as_dict, format_report, soak_backend
     from armreach_core.errors import ConfigError
-    from armreach_core.plugins.host import available_backends
 
     if args.steps < 0 or args.cycles < 0 or args.episode_steps < 1:
         raise ConfigError("--steps and --cycles must be >= 0 and --episode-steps >= 1")
-    backends = args.backend or _installed(available_backends())
+    backends = args.backend or installed_backends()
     bounds = Bounds()
     reports = []
     for backend in backends:
@@ -47,17 +47,3 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(as_dict(reports, bounds), indent=2))
     return 0 if all(r.passed for r in reports) else 1
-
-
-def _installed(names: list[str]) -> list[str]:
-    from armreach_core.errors import BackendUnavailableError
-    from armreach_core.plugins.lookup import load_backend_class
-
-    found = []
-    for name in names:
-        try:
-            load_backend_class(name)
-        except BackendUnavailableError:
-            continue
-        found.append(name)
-    return found

@@ -1,24 +1,27 @@
 """``armreach bench``: what an env step costs next to the engine's own loop, and more.
 
 For each backend, in one run: the bare engine loop doing the physics of one env step
-(the backend plugin's :class:`~armreach_core.plugins.specs.BackendProbes`), the full env step with random actions, reset, env
-creation with the model cached, vectorized throughput with 1 and 2 worker processes,
-and, when the ``rl`` extra is installed, Stable-Baselines3 training throughput with the
-paper preset (:mod:`armreach_core.rl.throughput`).
+(the backend plugin's :class:`~armreach_core.plugins.specs.BackendProbes`), the full env
+step with random actions, reset, env creation with the model cached, vectorized throughput
+with 1 and 2 worker processes, and, when the ``rl`` extra is installed, Stable-Baselines3
+training throughput with the paper preset (:mod:`armreach_core.rl.throughput`).
 """
 
 from __future__ import annotations
 
 import gc
+import json
 import os
 import platform
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from armreach_core.diagnostics.tables import markdown_table
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ArmReachError
 from armreach_core.plugins.lookup import load_backend_class, load_backend_probes
@@ -271,9 +274,15 @@ def to_markdown(results: list[BackendBench]) -> str:
                 [f"{r.training_steps_per_s.get(key, float('nan')):,.0f}" for r in results],
             )
         )
-    lines = [f"| measure | {' | '.join(names)} |", "|---|" + "---|" * len(names)]
-    lines += [f"| {label} | {' | '.join(values)} |" for label, values in rows]
-    return "\n".join(lines) + "\n"
+    return markdown_table(["measure", *names], [[label, *values] for label, values in rows]) + "\n"
+
+
+def save(results: list[BackendBench], out: Path) -> list[Path]:
+    """Write ``bench.json`` and ``bench.md`` into ``out``: the paths written."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "bench.json").write_text(json.dumps(to_json(results), indent=2) + "\n")
+    (out / "bench.md").write_text(to_markdown(results))
+    return [out / "bench.json", out / "bench.md"]
 
 
 def check_backends(backends: Sequence[str]) -> None:

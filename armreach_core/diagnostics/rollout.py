@@ -1,0 +1,101 @@
+"""One seeded episode of the reach task, with pictures along the way: what ``armreach rollout`` shows."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from armreach_core.env import ArmEnv
+from armreach_core.plugins.defaults import DEFAULT_TASK
+from armreach_core.robot.ik import RESTARTS, IKPolicy
+
+#: Control steps between two frames of the episode.
+FRAME_EVERY = 25
+#: Frames in the saved strip: the first, the last and evenly spaced ones between.
+STRIP_FRAMES = 4
+
+
+@dataclass(frozen=True)
+class Rollout:
+    """One episode: its summary (JSON-ready) and a strip of frames side by side."""
+
+    summary: dict[str, Any]
+    strip: np.ndarray[Any, Any]
+
+
+def rollout(
+    backend: str,
+    *,
+    policy: str = "ik",
+    seed: int = 0,
+    max_steps: int = 400,
+    viewer: bool = False,
+    env_kwargs: Mapping[str, Any] | None = None,
+) -> Rollout:
+    """Run one episode from ``reset(seed=seed)`` with the IK reference (``policy="ik"``) or random actions.
+
+    Args:
+        backend: the physics backend.
+        policy: ``"ik"`` (the planned IK reference) or ``"random"`` (the action space's samples).
+        seed: seeds the reset and the action space.
+        max_steps: the episode's step limit.
+        viewer: also show the episode in a live window, in real time.
+        env_kwargs: the arm's env arguments (``urdf``, ``home``, ...).
+    """
+    env = ArmEnv(
+        DEFAULT_TASK,
+        backend=backend,
+        render_mode="human" if viewer else "rgb_array",
+        **dict(env_kwargs or {}),
+        max_episode_steps=max_steps,
+    )
+    try:
+        _, info = env.reset(seed=seed)
+        env.action_space.seed(seed)
+        ik = IKPolicy(env.robot, env.max_joint_step, restarts=RESTARTS)
+        frames = [env.backend.render(env.camera)]
+        steps, total = 0, 0.0
+        while True:
+            if policy == "ik":
+                action = ik.act(env.backend.joint_state()[0], env.task.target)  # type: ignore[attr-defined]
+            else:
+                action = env.action_space.sample()
+            _, reward, terminated, truncated, info = env.step(action)
+            steps += 1
+            total += float(reward)
+            if steps % FRAME_EVERY == 0:
+                frames.append(env.backend.render(env.camera))
+            if terminated or truncated:
+                break
+        frames.append(env.backend.render(env.camera))
+    finally:
+        env.close()
+    picks = [frames[i] for i in np.linspace(0, len(frames) - 1, num=min(STRIP_FRAMES, len(frames))).round().astype(int)]
+    summary = {
+        "backend": backend,
+        "policy": policy,
+        "seed": seed,
+        "steps": steps,
+        "is_success": bool(info["is_success"]),
+        "distance_m": float(info["distance"]),
+        "return": total,
+    }
+    return Rollout(summary=summary, strip=np.concatenate([f for f in picks if f is not None], axis=1))
+
+
+def save_rollout(result: Rollout, out: Path) -> list[Path]:
+    """Write ``rollout.png`` (the strip) and ``summary.json`` into ``out``: the paths written."""
+    from PIL import Image
+
+    out.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(result.strip).save(out / "rollout.png")
+    (out / "summary.json").write_text(json.dumps(result.summary, indent=2) + "\n")
+    return [out / "rollout.png", out / "summary.json"]
+
+
+__all__ = ["Rollout", "rollout", "save_rollout"]
