@@ -62,7 +62,9 @@ def test_wheel_ships_the_assets(tmp_path):
     assert "armreach_core/assets/ar6/ar6.urdf" in names
     assert "armreach_core/assets/ar6/README.md" in names
     assert "armreach_core/py.typed" in names
-    assert "armreach_core/tools/bench.py" in names
+    for module in ("robot/model.py", "plugins/builtin.py", "tasks/reach/env.py", "diagnostics/bench.py", "rl/train.py"):
+        assert f"armreach_core/{module}" in names  # every layer's folder is a package of the wheel
+    assert "armreach_core/tasks/reach/rl_zoo3.yml" in names
     entry_points = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("entry_points.txt"))).decode()
     assert "armreach = armreach_core.plugins.builtin" in entry_points
     assert not any(n.startswith(("backends/", "tasks/", "tests/")) for n in names)
