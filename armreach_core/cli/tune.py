@@ -33,10 +33,10 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from armreach_core.rl.sweep import ArmSpec
+    from armreach_core.rl.sweep_spec import parse_arm
     from armreach_core.rl.tune import TuneSpec, load_space, run_tune
 
-    arm = ArmSpec.parse(
+    arm = parse_arm(
         {
             "urdf": args.urdf,
             "ee_link": args.ee_link,

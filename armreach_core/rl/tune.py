@@ -24,8 +24,9 @@ from typing import Any
 import yaml
 
 from armreach_core.errors import ArmReachError, ConfigError
-from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_ROBOT, DEFAULT_TASK
-from armreach_core.rl.sweep import ArmSpec, Trial, progress_callback, require_ray, run_trial, start_ray
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
+from armreach_core.rl.sweep_spec import BUNDLED_ARM, SweepArm, Trial
+from armreach_core.rl.sweep_trials import progress_callback, require_ray, run_trial, start_ray
 
 #: A key of the search space that is not a preset key: the width of both hidden layers.
 NET_WIDTH = "net_width"
@@ -45,7 +46,7 @@ PPO_SPACE: dict[str, dict[str, list[Any]]] = {
     NET_WIDTH: {"choice": [64, 128, 256]},
 }
 #: The bundled arm.
-BUNDLED = ArmSpec(DEFAULT_ROBOT)
+BUNDLED = BUNDLED_ARM
 #: Weight of reaching 95 % training success early, next to evaluation success (0-1).
 TIME_BONUS = 0.1
 
@@ -110,7 +111,7 @@ class TuneSpec:
     preset: str = "fast"
     task: str = DEFAULT_TASK
     backend: str = DEFAULT_BACKEND
-    arm: ArmSpec = BUNDLED
+    arm: SweepArm = BUNDLED
     steps: int = 30_000
     episodes: int = 20
     seed: int = 0

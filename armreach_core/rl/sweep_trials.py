@@ -1,0 +1,162 @@
+"""Running trials: Ray start-up, and one trial (train or resume or reuse, then evaluate) into a run folder.
+
+Shared by sweeps (:mod:`armreach_core.rl.sweep`) and tuning (:mod:`armreach_core.rl.tune`).
+A trial's folder is an ordinary run folder (``armreach evaluate`` works on it) plus
+:data:`TRIAL_RECORD`, where it last ran and what it did; its result row is read back
+from that folder (:func:`trial_row`), so a row is the same whether the trial ran now or before.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from armreach_core.errors import ArmReachError
+from armreach_core.rl.sweep_spec import Trial
+
+__all__ = [
+    "RAY_EXTRA",
+    "TRIAL_RECORD",
+    "RayUnavailableError",
+    "progress_callback",
+    "ray_node",
+    "require_ray",
+    "run_trial",
+    "start_ray",
+    "summary_path",
+    "trial_row",
+]
+
+#: What ``pip`` installs for sweeps and tuning.
+RAY_EXTRA = "pip install 'armreach[ray]'"
+#: Where a trial last ran and what it did (train, resume, reuse), in its run folder.
+TRIAL_RECORD = "trial.json"
+
+
+class RayUnavailableError(ArmReachError):
+    """Ray Tune (or Optuna) is not installed."""
+
+
+def require_ray() -> Any:
+    """``ray`` with Tune, or a :class:`RayUnavailableError` naming the install."""
+    try:
+        import ray
+        import ray.tune
+    except ImportError as exc:
+        raise RayUnavailableError(
+            f"sweeps and tuning run on Ray Tune, which is not installed ({exc}); {RAY_EXTRA}"
+        ) from None
+    return ray
+
+
+def start_ray(address: str | None, cpus: int | None = None) -> Any:
+    """Connect to the cluster at ``address`` (or ``RAY_ADDRESS``), else start a local Ray with ``cpus`` CPUs."""
+    ray = require_ray()
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    os.environ.setdefault("RAY_DEDUP_LOGS", "0")
+    if ray.is_initialized():
+        return ray
+    address = address or os.environ.get("RAY_ADDRESS")
+    if address:
+        ray.init(address=address, log_to_driver=False)
+    else:
+        ray.init(num_cpus=cpus or os.cpu_count() or 1, include_dashboard=False, log_to_driver=False)
+    return ray
+
+
+def ray_node() -> str | None:
+    """The Ray node this process runs on, if it runs in Ray."""
+    try:
+        import ray
+
+        return str(ray.get_runtime_context().get_node_id()) if ray.is_initialized() else None
+    except ImportError:
+        return None
+
+
+def summary_path(run_dir: Path, trial: Trial) -> Path:
+    """Where the trial's evaluation summary is (the folder ``armreach evaluate`` writes for its backend)."""
+    return run_dir / f"eval-{trial.backend}" / "summary.json"
+
+
+def run_trial(trial: Trial, out: Path, callbacks: Sequence[Any] = ()) -> dict[str, Any]:
+    """Train (or resume, or reuse) and evaluate one trial into ``out/runs/<id>``; its result row."""
+    from armreach_core.rl import runs
+    from armreach_core.rl.evaluate import evaluate_run, save_evaluation
+    from armreach_core.rl.experiment import plan_run, training_seconds
+    from armreach_core.rl.train import train
+
+    run_dir = out / "runs" / trial.id
+    run_dir.parent.mkdir(parents=True, exist_ok=True)
+    config, action = plan_run(run_dir, trial.config())
+    t0 = time.perf_counter()
+    if action != "reusing":
+        command = ["armreach", "sweep", f"(trial {trial.id})"]
+        result = train(config, run_dir, resume=action != "training", stream=None, command=command, callbacks=callbacks)
+        if result.interrupted:
+            raise KeyboardInterrupt
+    summary_file = summary_path(run_dir, trial)
+    model = run_dir / runs.MODEL
+    if action == "reusing" and summary_file.is_file() and summary_file.stat().st_mtime >= model.stat().st_mtime:
+        summary = json.loads(summary_file.read_text(encoding="utf-8"))
+        evaluated = False
+    else:
+        evaluation = evaluate_run(run_dir, episodes=trial.episodes, backend=trial.backend)
+        summary = save_evaluation(evaluation, summary_file.parent)
+        evaluated = True
+    where = {"host": platform.node(), "pid": os.getpid(), "ray_node": ray_node(), "action": action}
+    (run_dir / TRIAL_RECORD).write_text(json.dumps(where), encoding="utf-8")
+    row = trial_row(trial, run_dir, summary)
+    row.update(evaluated=evaluated, train_seconds=training_seconds(run_dir, time.perf_counter() - t0))
+    return row
+
+
+def trial_row(trial: Trial, run_dir: Path, summary: Mapping[str, Any]) -> dict[str, Any]:
+    """The facts of a finished trial that the sweep's tables hold."""
+    from armreach_core.rl.sweep_report import time_to_success
+
+    steps95, seconds95 = time_to_success(run_dir)
+    record = run_dir / TRIAL_RECORD
+    where = json.loads(record.read_text(encoding="utf-8")) if record.is_file() else {}
+    return {
+        "host": where.get("host"),
+        "ray_node": where.get("ray_node"),
+        "trial": trial.id,
+        "cell": trial.cell,
+        "algo": trial.algo,
+        "arm": trial.arm.label,
+        "backend": trial.backend,
+        "seed": trial.seed,
+        "overrides": dict(trial.overrides),
+        "run_dir": str(run_dir),
+        "success_rate": float(summary["success_rate"]),
+        "steps_to_goal": float(summary.get("steps_to_goal_mean", float("nan"))),
+        "jerk": float(summary.get("jerk_mean", float("nan"))),
+        "ended_by": dict(summary.get("ended_by", {})),
+        "steps_to_95": steps95,
+        "minutes_to_95": seconds95 / 60 if seconds95 == seconds95 else seconds95,
+    }
+
+
+def progress_callback(report: Callable[[dict[str, Any]], None], every: int) -> Any:
+    """An SB3 callback that calls ``report`` with the training success rate every ``every`` env steps."""
+    from armreach_core.rl.callbacks import SuccessRateCallback
+
+    class _Report(SuccessRateCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self._next = every
+
+        def _on_step(self) -> bool:
+            keep_going = super()._on_step()
+            if self.num_timesteps >= self._next:
+                self._next += every
+                report({"timesteps": int(self.num_timesteps), "success": self.rate or 0.0})
+            return bool(keep_going)
+
+    return _Report()
