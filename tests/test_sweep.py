@@ -74,6 +74,38 @@ def test_without_ray_the_commands_name_the_install(tmp_path):
     assert "pip install 'armreach[ray]'" in result.stderr
 
 
+def test_a_sweep_arm_is_a_label_and_the_core_arm_spec():
+    from armreach_core.rl.sweep_spec import parse_arm
+    from armreach_core.robot.spec import ArmSpec
+
+    arm = parse_arm({"urdf": "ar6", "home": [0, 1, 0, 0, 0, 0], "base_orientation": [0, 0, 0, 2]}, "arm")
+    assert arm.label == "ar6" and arm.spec == ArmSpec.create(home=[0, 1, 0, 0, 0, 0], base_orientation=[0, 0, 0, 2])
+    assert arm.spec.base_orientation == (0.0, 0.0, 0.0, 1.0)  # normalized in the spec...
+    # ... while the run's settings take the entry as written, as they always have
+    assert arm.placement() == {"home": (0.0, 1.0, 0.0, 0.0, 0.0, 0.0), "base_position": None,
+                               "base_orientation": (0.0, 0.0, 0.0, 2.0)}  # fmt: skip
+    with pytest.raises(ConfigError, match=r"arms\[1\]: base_position=.* three finite numbers"):
+        parse_arm({"base_position": [0, 1]}, "arms[1]")
+
+
+def test_arm_flags_build_a_checked_arm_spec_and_keep_their_keyword_arguments():
+    import argparse
+
+    from armreach_core.cli.robot_args import add_robot_arguments, arm_spec, robot_kwargs
+    from armreach_core.robot.spec import ArmSpec
+
+    parser = argparse.ArgumentParser()
+    add_robot_arguments(parser)
+    args = parser.parse_args(["--urdf", "arm.urdf", "--home", "0", "1", "--base-orientation", "0", "0", "0", "2"])
+    assert arm_spec(args) == ArmSpec.create("arm.urdf", home=[0, 1], base_orientation=[0, 0, 0, 2])
+    assert robot_kwargs(args) == {"urdf": "arm.urdf", "home": (0.0, 1.0), "base_orientation": (0.0, 0.0, 0.0, 2.0)}
+    assert robot_kwargs(parser.parse_args([])) == {}
+    with pytest.raises(ConfigError, match="arm flags: base_orientation=.* all zero"):
+        robot_kwargs(parser.parse_args(["--base-orientation", "0", "0", "0", "0"]))
+    with pytest.raises(ConfigError, match="arm flags: home=.* finite"):
+        robot_kwargs(parser.parse_args(["--home", "nan"]))
+
+
 ray = pytest.importorskip("ray")
 
 

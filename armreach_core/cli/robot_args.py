@@ -5,6 +5,12 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from armreach_core.errors import ConfigError
+from armreach_core.robot.spec import ArmSpec
+
+#: The robot flags' keys (argparse destinations), the env keyword argument of each.
+ROBOT_FLAGS = ("urdf", "ee_link", "home", "base_position", "base_orientation")
+
 
 def add_robot_arguments(parser: argparse.ArgumentParser, *, urdf: bool = True, of_run: bool = False) -> None:
     """``--urdf``, ``--ee-link``, ``--home``, ``--base-position`` and ``--base-orientation``.
@@ -44,18 +50,30 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, urdf: bool = True, o
     )
 
 
+def arm_spec(args: argparse.Namespace) -> ArmSpec:
+    """The arm the robot flags describe (a flag not given: unset), checked by :meth:`ArmSpec.create`.
+
+    Raises:
+        ConfigError: a value that is not finite, or an all-zero quaternion, naming the flag's key.
+    """
+    try:
+        return ArmSpec.create(
+            getattr(args, "urdf", None),
+            getattr(args, "ee_link", None),
+            getattr(args, "home", None),
+            base_position=getattr(args, "base_position", None),
+            base_orientation=getattr(args, "base_orientation", None),
+        )
+    except ConfigError as exc:
+        raise ConfigError(f"arm flags: {exc}") from None
+
+
 def robot_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    """Env keyword arguments for the robot flags that were given."""
-    names = {
-        "urdf": "urdf",
-        "ee_link": "ee_link",
-        "home": "home",
-        "base_position": "base_position",
-        "base_orientation": "base_orientation",
-    }
+    """Env keyword arguments for the robot flags that were given, as given (checked by :func:`arm_spec` first)."""
+    arm_spec(args)
     out: dict[str, Any] = {}
-    for flag, key in names.items():
-        value = getattr(args, flag, None)
+    for key in ROBOT_FLAGS:
+        value = getattr(args, key, None)
         if value is not None:
             out[key] = tuple(value) if isinstance(value, list) else value
     return out
