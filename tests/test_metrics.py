@@ -98,3 +98,80 @@ def test_iqm_interval_is_scipys_trimmed_mean_with_a_bootstrap_interval() -> None
     assert (one.estimate, one.low, one.high) == (0.5, 0.5, 0.5)
     assert iqm_interval([1.0, 1.0, 1.0]).format(100.0, 0, " %") == "100 % [100, 100]"
     assert iqm_interval([]).format() == "n/a"
+
+
+def _episodes_env() -> object:
+    """A gymnasium env whose episode ``k`` lasts ``k + 1`` steps and succeeds when ``k`` is odd."""
+    import gymnasium as gym
+
+    class Env(gym.Env[np.ndarray, np.ndarray]):
+        observation_space = gym.spaces.Box(-1.0, 1.0, (1,))
+        action_space = gym.spaces.Box(-1.0, 1.0, (1,))
+
+        def __init__(self) -> None:
+            self.episode, self.steps = -1, 0
+
+        def reset(self, *, seed=None, options=None):
+            super().reset(seed=seed)
+            self.episode, self.steps = self.episode + 1, 0
+            return np.zeros(1, dtype=np.float32), {}
+
+        def step(self, action):
+            self.steps += 1
+            done = self.steps > self.episode
+            info = {"is_success": done and self.episode % 2 == 1, "distance": 0.5 / (self.episode + 1)}
+            return np.zeros(1, dtype=np.float32), 2.0, done, False, info
+
+    return Env()
+
+
+def _play(path: str, episodes: int, *, append: bool = False) -> None:
+    from stable_baselines3.common.monitor import Monitor
+
+    env = Monitor(_episodes_env(), path, info_keywords=("is_success", "distance"), override_existing=not append)
+    for _ in range(episodes):
+        env.reset()
+        done = False
+        while not done:
+            _, _, terminated, truncated, _ = env.step(np.zeros(1, dtype=np.float32))
+            done = terminated or truncated
+    env.close()
+
+
+def test_monitor_logs_written_by_sb3_read_back_as_typed_columns(tmp_path) -> None:
+    from armreach_core.errors import ConfigError
+    from armreach_core.rl.monitor import (
+        episode_rewards,
+        episode_successes,
+        load_monitor,
+        monitor_paths,
+        training_progress,
+    )
+
+    monitor = tmp_path / "monitor"
+    monitor.mkdir()
+    _play(str(monitor / "0"), 4)
+    _play(str(monitor / "0"), 2, append=True)  # a resumed run appends to its log
+    _play(str(monitor / "1"), 2)
+    assert [p.name for p in monitor_paths(tmp_path)] == ["0.monitor.csv", "1.monitor.csv"]
+    log = load_monitor(monitor / "0.monitor.csv")
+    assert list(log) == ["r", "l", "t", "is_success", "distance"]
+    np.testing.assert_array_equal(log["l"], [1, 2, 3, 4, 1, 2])
+    np.testing.assert_array_equal(log["r"], 2.0 * log["l"])
+    assert log["t"].dtype == np.float64 and np.all(np.diff(log["t"][:4]) >= 0)
+    np.testing.assert_array_equal(log["is_success"], [False, True, False, True, False, True])
+    np.testing.assert_allclose(log["distance"], [0.5, 0.25, 0.5 / 3, 0.125, 0.5, 0.25], atol=1e-6)
+    np.testing.assert_array_equal(episode_successes(log), [0, 1, 0, 1, 0, 1])
+    # Logs of parallel envs interleave by position in each log: env 1's 2 episodes sit at 1/4 and 3/4 of env 0's 6.
+    np.testing.assert_array_equal(episode_rewards(tmp_path), [2, 4, 2, 6, 8, 2, 4, 4])
+    progress = training_progress(tmp_path)
+    assert progress.shape == (8, 3)
+    assert progress[-1, 0] == 1 + 2 + 3 + 4 + 1 + 2 + 1 + 2  # env steps of every episode
+    assert progress[:, 2].sum() == 4 and np.all(np.diff(progress[:, 1]) >= 0)
+    # A log without rows reads as empty columns; a row cut off while written is an error naming the file.
+    header = (monitor / "0.monitor.csv").read_text().splitlines()[:2]
+    (tmp_path / "empty.monitor.csv").write_text("\n".join(header) + "\n")
+    assert {k: v.size for k, v in load_monitor(tmp_path / "empty.monitor.csv").items()} == dict.fromkeys(log, 0)
+    (tmp_path / "cut.monitor.csv").write_text("\n".join([*header, "2.0,1"]) + "\n")
+    with pytest.raises(ConfigError, match=r"cut\.monitor\.csv: episode 1 has no 't' value"):
+        load_monitor(tmp_path / "cut.monitor.csv")

@@ -8,7 +8,6 @@ number in ``report.md`` can be traced to a run.
 
 from __future__ import annotations
 
-import csv
 import sys
 import time
 from dataclasses import dataclass, field
@@ -25,6 +24,8 @@ from armreach_core.rl.checkpoints import read_progress
 from armreach_core.rl.config import RunConfig, config_mismatch, extend, resolve_config
 from armreach_core.rl.evaluate import EvaluationResult, evaluate_run, save_evaluation
 from armreach_core.rl.metrics import MeanStd, convergence_episode, moving_average
+from armreach_core.rl.monitor import episode_rewards, load_monitors
+from armreach_core.rl.monitor import training_progress as training_progress  # where it was first defined
 from armreach_core.rl.stats import Interval, iqm_interval
 from armreach_core.rl.train import train
 
@@ -115,39 +116,6 @@ def contender_keys() -> tuple[str, ...]:
     return ("ppo", "ddpg", *(f"fast-{algo}" for algo in FAST_ALGOS))
 
 
-def episode_rewards(run_dir: Path) -> npt.NDArray[np.float64]:
-    """Training episode returns from the run's monitor logs (one per env), in order.
-
-    Rows keep their order within each env's log (a resumed run appends to it); logs of
-    parallel envs are interleaved by their position in each log.
-    """
-    rows: list[tuple[float, float]] = []
-    for path in sorted((run_dir / "monitor").glob("*.monitor.csv")):
-        lines = [line for line in path.read_text(encoding="utf-8").splitlines() if not line.startswith("#")]
-        records = list(csv.DictReader(lines))
-        rows += [((j + 0.5) / len(records), float(record["r"])) for j, record in enumerate(records)]
-    rows.sort(key=lambda row: row[0])
-    return np.asarray([r for _, r in rows], dtype=np.float64)
-
-
-def training_progress(run_dir: Path) -> npt.NDArray[np.float64]:
-    """Finished training episodes in time order, as rows (env steps so far, seconds, success 0/1).
-
-    From the monitor logs of every env: episodes are ordered by their end time, and the
-    steps count is the sum of the lengths of the episodes finished by then (all envs).
-    """
-    rows: list[tuple[float, float, float]] = []
-    for path in sorted((run_dir / "monitor").glob("*.monitor.csv")):
-        lines = [line for line in path.read_text(encoding="utf-8").splitlines() if not line.startswith("#")]
-        for record in csv.DictReader(lines):
-            rows.append((float(record["t"]), float(record["l"]), float(record.get("is_success") == "True")))
-    rows.sort()
-    if not rows:
-        return np.zeros((0, 3))
-    table = np.asarray(rows, dtype=np.float64)
-    return np.column_stack([np.cumsum(table[:, 1]), table[:, 0], table[:, 2]])
-
-
 def plan_run(run_dir: Path, config: RunConfig) -> tuple[RunConfig, str]:
     """What to do with an experiment's run folder: train, resume, extend or reuse it.
 
@@ -182,9 +150,8 @@ def training_seconds(run_dir: Path, fallback: float) -> float:
     if recorded:
         return float(recorded)
     times = [0.0]
-    for path in (run_dir / "monitor").glob("*.monitor.csv"):
-        lines = [line for line in path.read_text(encoding="utf-8").splitlines() if not line.startswith("#")]
-        times += [float(record["t"]) for record in csv.DictReader(lines)]
+    for log in load_monitors(run_dir):
+        times += log["t"].tolist()
     return max(times) if max(times) > 0 else fallback
 
 

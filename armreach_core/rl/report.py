@@ -13,8 +13,9 @@ from armreach_core.env import ArmEnv
 from armreach_core.rl import runs
 from armreach_core.rl.agents import Agent, env_kwargs
 from armreach_core.rl.evaluate import EvaluationResult, load_agent, run_episodes
-from armreach_core.rl.experiment import PAPER, REWARD_WINDOW, ContenderResult, training_progress
+from armreach_core.rl.experiment import PAPER, REWARD_WINDOW, ContenderResult
 from armreach_core.rl.metrics import MeanStd, moving_average
+from armreach_core.rl.monitor import training_progress
 
 #: Episodes in the moving average of the training-success figure.
 PROGRESS_WINDOW = 100

@@ -5,7 +5,8 @@ Layout of ``runs/<name>/``::
     config.yaml        the resolved settings (what `--resume` and `evaluate` read back)
     command.txt        the command line that created the run (and each resume)
     environment.json   Python, package and engine versions, and the loaded plugins
-    monitor.csv        one row per training episode (reward, length, time, success)
+    monitor/           one log per training env, a row per episode (reward, length, time, success),
+                       read by armreach_core.rl.monitor
     tb/                TensorBoard logs
     checkpoint.zip     the latest checkpoint (+ checkpoint_replay.pkl for off-policy)
     checkpoint.json    its step count and the training wall-clock so far
@@ -42,6 +43,7 @@ import yaml
 from armreach_core.errors import ConfigError
 from armreach_core.plugins.host import get_host
 from armreach_core.rl.config import RunConfig
+from armreach_core.rl.monitor import MONITOR_DIR, monitor_paths
 
 CONFIG = "config.yaml"
 COMMAND = "command.txt"
@@ -267,7 +269,7 @@ def new_run_dir(path: Path) -> Path:
             raise ConfigError(
                 f"{path} already holds a run; continue it with `armreach train --resume {path}` or choose another --out"
             )
-        for stale in ("monitor", "tb"):
+        for stale in (MONITOR_DIR, "tb"):
             shutil.rmtree(path / stale, ignore_errors=True)
         for name in (CONFIG, PROGRESS, REPLAY):
             (path / name).unlink(missing_ok=True)
@@ -278,7 +280,7 @@ def new_run_dir(path: Path) -> Path:
 def monitor_rows(run_dir: Path) -> dict[str, int]:
     """Episodes recorded so far in each monitor log (file name → rows)."""
     out: dict[str, int] = {}
-    for path in sorted((run_dir / "monitor").glob("*.monitor.csv")):
+    for path in monitor_paths(run_dir):
         with open(path, "rb") as handle:
             out[path.name] = max(sum(1 for _ in handle) - 2, 0)
     return out
@@ -286,7 +288,7 @@ def monitor_rows(run_dir: Path) -> dict[str, int]:
 
 def truncate_monitors(run_dir: Path, rows: dict[str, int]) -> None:
     """Cut each monitor log back to ``rows`` episodes (those the checkpoint includes)."""
-    for path in sorted((run_dir / "monitor").glob("*.monitor.csv")):
+    for path in monitor_paths(run_dir):
         keep = rows.get(path.name, 0)
         lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
         if len(lines) > keep + 2:

@@ -24,7 +24,7 @@ COLUMNS = ("trial", "cell", "algo", "arm", "backend", "seed", "success_rate", "s
 
 def rolling_success(run_dir: Path) -> np.ndarray:
     """Rows (env steps, seconds, success rate over the last :data:`WINDOW` training episodes)."""
-    from armreach_core.rl.experiment import training_progress
+    from armreach_core.rl.monitor import training_progress
 
     table = training_progress(run_dir)
     if len(table) == 0:
