@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.diagnostics.tables import markdown_table
 from armreach_core.env import ArmEnv
 from armreach_core.rl import runs
 from armreach_core.rl.agents import Agent, env_kwargs
@@ -19,6 +20,8 @@ from armreach_core.rl.monitor import training_progress
 
 #: Episodes in the moving average of the training-success figure.
 PROGRESS_WINDOW = 100
+#: The IK reference's row in the tables.
+IK_LABEL = "DLS inverse kinematics (reference)"
 
 
 def _paper(label: str, key: str) -> str:
@@ -53,14 +56,7 @@ def write_report(
         "episode, reward −d³ + 10; episode `i` seeded `10000 + i` for every agent). "
         f"Machine: {platform.machine()}, {platform.python_version()}, {_cpu_count()} CPU cores.",
         "",
-        "| agent | preset | env steps per seed | training wall-clock per seed (mean) |",
-        "|---|---|---|---|",
-    ]
-    for r in results:
-        steps = ", ".join(f"{n:,}" for n in sorted(set(r.timesteps))) or "0"
-        minutes = MeanStd.of(r.train_seconds).mean / 60
-        lines.append(f"| {r.contender.label} | {r.contender.preset} | {steps} | {minutes:.1f} min |")
-    lines += [
+        _budget_table(results),
         "",
         "The paper trained 614,400 steps (300 episodes of 2048 steps). Runs shorter than that are not the paper's "
         "full budget; its numbers are quoted as printed.",
@@ -72,73 +68,29 @@ def write_report(
         "Final average reward: the last value of that moving average. † marks agents whose preset trains with "
         "another reward or episode length than the paper's (see its preset), so that column is not comparable.",
         "",
-        "| agent | convergence episode (paper) | convergence episode (ours) | final avg. reward (paper) "
-        "| final avg. reward (ours) |",
-        "|---|---|---|---|---|",
-    ]
-    for r in results:
-        conv = r.convergence()
-        conv_text = "not reached" if conv.n == 0 else f"{conv.fmt(0)} ({r.converged_runs()}/{len(r.seeds)} runs)"
-        lines.append(
-            f"| {r.contender.label} | {_paper(r.contender.label, 'convergence')} | {conv_text} | "
-            f"{_paper(r.contender.label, 'final_reward')} | {r.final_reward().fmt(2)}{_dagger(r)} |"
-        )
-    lines += [
+        _convergence_table(results),
         "",
         "## Table 3: goal reaching",
         "",
-        "| agent | success % (paper) | success % (ours) | steps to goal (paper) | steps to goal (ours) |",
-        "|---|---|---|---|---|",
-    ]
-    for r in results:
-        lines.append(
-            f"| {r.contender.label} | {_paper(r.contender.label, 'success')} | {_pct(r.stat('success_rate', 100.0))} | "
-            f"{_paper(r.contender.label, 'steps')} | {_stg(r)} |"
-        )
-    lines.append(
-        f"| DLS inverse kinematics (reference) | – | {100 * ik_summary['success_rate']:.0f} | – | "
-        f"{ik_summary['steps_to_goal_mean']:.1f} ± {ik_summary['steps_to_goal_std']:.1f} (over episodes) |"
-    )
-    lines += [
+        _reaching_table(results, ik_summary),
         "",
         "## Table 4: success, reward and smoothness",
         "",
         f"Jerk: third finite difference of the joint angles at the control rate ({rate} Hz), per-joint RMS, averaged "
         "over each successful episode, then over episodes and seeds (rad/s³).",
         "",
-        "| agent | success % (paper / ours) | final reward (paper / ours) | jerk rad/s³ (paper / ours) "
-        "| evaluation return (ours) |",
-        "|---|---|---|---|---|",
-    ]
-    for r in results:
-        lines.append(
-            f"| {r.contender.label} | {_paper(r.contender.label, 'success')} / {_pct(r.stat('success_rate', 100.0))} | "
-            f"{_paper(r.contender.label, 'final_reward')} / {r.final_reward().fmt(2)}{_dagger(r)} | "
-            f"{_paper(r.contender.label, 'jerk')} / {_jerk(r)} | {r.stat('final_reward_mean').fmt(2)} |"
-        )
-    lines.append(
-        f"| DLS inverse kinematics (reference) | – / {100 * ik_summary['success_rate']:.0f} | – / – | "
-        f"– / {ik_summary['jerk_mean']:.2f} ± {ik_summary['jerk_std']:.2f} (over episodes) | "
-        f"{ik_summary['final_reward_mean']:.2f} |"
-    )
-    lines += [
+        _smoothness_table(results, ik_summary),
         "",
         "## Over seeds",
         "",
         "Success rate as the interquartile mean over seeds with its 95 % percentile-bootstrap interval "
         "(scipy; [low, high] shown from 2 seeds on), and how every evaluation episode ended.",
         "",
-        "| agent | seeds | success, IQM [95 % CI] | episodes ended by | training wall-clock per seed |",
-        "|---|---|---|---|---|",
+        _seeds_table(results),
+        "",
+        "## Figures",
+        "",
     ]
-    for r in results:
-        ended = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in r.ended_by().items()) or "–"
-        minutes = MeanStd.of(r.train_seconds).mean / 60
-        lines.append(
-            f"| {r.contender.label} | {len(r.seeds)} | {r.success_iqm().format(100.0, 0, ' %')} | {ended} "
-            f"| {minutes:.1f} min |"
-        )
-    lines += ["", "## Figures", ""]
     for caption, name in figures:
         lines += [f"![{caption}]({name})", "", f"*{caption}*", ""]
     lines += ["## Runs", ""]
@@ -149,6 +101,125 @@ def write_report(
     path = out / "report.md"
     runs.atomic_write_text(path, "\n".join(lines) + "\n")
     return path
+
+
+def _budget_table(results: list[ContenderResult]) -> str:
+    """Each agent's preset, env steps and training wall-clock."""
+    return markdown_table(
+        ("agent", "preset", "env steps per seed", "training wall-clock per seed (mean)"),
+        (
+            (
+                r.contender.label,
+                r.contender.preset,
+                ", ".join(f"{n:,}" for n in sorted(set(r.timesteps))) or "0",
+                f"{MeanStd.of(r.train_seconds).mean / 60:.1f} min",
+            )
+            for r in results
+        ),
+    )
+
+
+def _convergence_table(results: list[ContenderResult]) -> str:
+    """Table 2: convergence episode and final average reward, the paper's and ours."""
+    return markdown_table(
+        (
+            "agent",
+            "convergence episode (paper)",
+            "convergence episode (ours)",
+            "final avg. reward (paper)",
+            "final avg. reward (ours)",
+        ),
+        (
+            (
+                r.contender.label,
+                _paper(r.contender.label, "convergence"),
+                _convergence(r),
+                _paper(r.contender.label, "final_reward"),
+                f"{r.final_reward().fmt(2)}{_dagger(r)}",
+            )
+            for r in results
+        ),
+    )
+
+
+def _reaching_table(results: list[ContenderResult], ik_summary: dict[str, Any]) -> str:
+    """Table 3: success and steps to goal, the paper's and ours, and the IK reference's."""
+    return markdown_table(
+        ("agent", "success % (paper)", "success % (ours)", "steps to goal (paper)", "steps to goal (ours)"),
+        [
+            *(
+                (
+                    r.contender.label,
+                    _paper(r.contender.label, "success"),
+                    _pct(r.stat("success_rate", 100.0)),
+                    _paper(r.contender.label, "steps"),
+                    _stg(r),
+                )
+                for r in results
+            ),
+            (
+                IK_LABEL,
+                "–",
+                f"{100 * ik_summary['success_rate']:.0f}",
+                "–",
+                f"{ik_summary['steps_to_goal_mean']:.1f} ± {ik_summary['steps_to_goal_std']:.1f} (over episodes)",
+            ),
+        ],
+    )
+
+
+def _smoothness_table(results: list[ContenderResult], ik_summary: dict[str, Any]) -> str:
+    """Table 4: success, final reward and jerk, the paper's and ours, and the IK reference's."""
+    return markdown_table(
+        (
+            "agent",
+            "success % (paper / ours)",
+            "final reward (paper / ours)",
+            "jerk rad/s³ (paper / ours)",
+            "evaluation return (ours)",
+        ),
+        [
+            *(
+                (
+                    r.contender.label,
+                    f"{_paper(r.contender.label, 'success')} / {_pct(r.stat('success_rate', 100.0))}",
+                    f"{_paper(r.contender.label, 'final_reward')} / {r.final_reward().fmt(2)}{_dagger(r)}",
+                    f"{_paper(r.contender.label, 'jerk')} / {_jerk(r)}",
+                    r.stat("final_reward_mean").fmt(2),
+                )
+                for r in results
+            ),
+            (
+                IK_LABEL,
+                f"– / {100 * ik_summary['success_rate']:.0f}",
+                "– / –",
+                f"– / {ik_summary['jerk_mean']:.2f} ± {ik_summary['jerk_std']:.2f} (over episodes)",
+                f"{ik_summary['final_reward_mean']:.2f}",
+            ),
+        ],
+    )
+
+
+def _seeds_table(results: list[ContenderResult]) -> str:
+    """Success over seeds (IQM with its interval), how episodes ended, training wall-clock."""
+    return markdown_table(
+        ("agent", "seeds", "success, IQM [95 % CI]", "episodes ended by", "training wall-clock per seed"),
+        (
+            (
+                r.contender.label,
+                len(r.seeds),
+                r.success_iqm().format(100.0, 0, " %"),
+                ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in r.ended_by().items()) or "–",
+                f"{MeanStd.of(r.train_seconds).mean / 60:.1f} min",
+            )
+            for r in results
+        ),
+    )
+
+
+def _convergence(r: ContenderResult) -> str:
+    conv = r.convergence()
+    return "not reached" if conv.n == 0 else f"{conv.fmt(0)} ({r.converged_runs()}/{len(r.seeds)} runs)"
 
 
 def _dagger(r: ContenderResult) -> str:

@@ -20,6 +20,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+from armreach_core.diagnostics.tables import markdown_table
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
 from armreach_core.perturb import DEFAULT_EPISODES, DEFAULT_MAX_STEPS, Perturbation, PerturbWrapper, with_value
@@ -199,18 +200,38 @@ def report(cells: Sequence[Cell], title: str) -> str:
         "and jerk over successful episodes. Worst: the magnitude with the lowest success rate (ties: the most "
         "steps). Mean: over the grid, nominal value included.",
         "",
-        "| perturbation | grid | nominal | worst (magnitude) | worst steps | mean | mean steps | mean jerk (rad/s³) |",
-        "|---|---|---|---|---|---|---|---|",
+        markdown_table(
+            (
+                "perturbation",
+                "grid",
+                "nominal",
+                "worst (magnitude)",
+                "worst steps",
+                "mean",
+                "mean steps",
+                "mean jerk (rad/s³)",
+            ),
+            (
+                (
+                    row["perturbation"],
+                    f"{_grid(cells, row['perturbation'])} ({UNITS.get(row['perturbation'], '')})",
+                    f"{100 * row['nominal_success']:.0f}",
+                    f"{100 * row['worst_success']:.0f} ({row['worst_magnitude']:g})",
+                    _fmt(row["worst_steps"]),
+                    f"{100 * row['mean_success']:.0f}",
+                    _fmt(row["mean_steps"]),
+                    _fmt(row["mean_jerk"]),
+                )
+                for row in summarize(cells)
+            ),
+        ),
     ]
-    for row in summarize(cells):
-        grid = ", ".join(f"{c.magnitude:g}" for c in cells if c.perturbation == row["perturbation"])
-        lines.append(
-            f"| {row['perturbation']} | {grid} ({UNITS.get(row['perturbation'], '')}) | "
-            f"{100 * row['nominal_success']:.0f} | {100 * row['worst_success']:.0f} ({row['worst_magnitude']:g}) | "
-            f"{_fmt(row['worst_steps'])} | {100 * row['mean_success']:.0f} | {_fmt(row['mean_steps'])} | "
-            f"{_fmt(row['mean_jerk'])} |"
-        )
     return "\n".join(lines) + "\n"
+
+
+def _grid(cells: Sequence[Cell], perturbation: str) -> str:
+    """The magnitudes of a perturbation's cells."""
+    return ", ".join(f"{c.magnitude:g}" for c in cells if c.perturbation == perturbation)
 
 
 def _fmt(value: float) -> str:

@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from armreach_core.diagnostics.tables import markdown_table
+
 #: Training success (over the last WINDOW episodes) that counts as reached.
 TARGET = 0.95
 WINDOW = 100
@@ -79,20 +81,35 @@ def write_report(out: Path, rows: Sequence[Mapping[str, Any]], *, wall_seconds: 
         "95 % bootstrap interval. Steps and minutes to 95 %: when the training success over the last 100 episodes",
         "first reached 95 % (mean over the seeds that reached it; n/N of them did).",
         "",
-        "| cell | seeds | success IQM [95 % CI] | steps to 95 % | minutes to 95 % | reached | steps to goal "
-        "| jerk (rad/s³) |",
-        "|---|---|---|---|---|---|---|---|",
+        markdown_table(
+            (
+                "cell",
+                "seeds",
+                "success IQM [95 % CI]",
+                "steps to 95 %",
+                "minutes to 95 %",
+                "reached",
+                "steps to goal",
+                "jerk (rad/s³)",
+            ),
+            (
+                (
+                    cell,
+                    len(members),
+                    iqm_interval([float(r["success_rate"]) for r in members]).format(100, 1, " %"),
+                    _mean([r["steps_to_95"] for r in members]),
+                    _mean([r["minutes_to_95"] for r in members]),
+                    f"{sum(r['steps_to_95'] == r['steps_to_95'] for r in members)}/{len(members)}",
+                    _mean([r["steps_to_goal"] for r in members]),
+                    _mean([r["jerk"] for r in members]),
+                )
+                for cell, members in cells(ordered).items()
+            ),
+        ),
+        "",
+        "Every trial: `trials.csv`, `trials.json`; learning curves: `curves.png`.",
+        "",
     ]
-    for cell, members in cells(ordered).items():
-        success = iqm_interval([float(r["success_rate"]) for r in members])
-        reached = [r for r in members if r["steps_to_95"] == r["steps_to_95"]]
-        steps95 = _mean([r["steps_to_95"] for r in members])
-        lines.append(
-            f"| {cell} | {len(members)} | {success.format(100, 1, ' %')} | {steps95} "
-            f"| {_mean([r['minutes_to_95'] for r in members])} | {len(reached)}/{len(members)} "
-            f"| {_mean([r['steps_to_goal'] for r in members])} | {_mean([r['jerk'] for r in members])} |"
-        )
-    lines += ["", "Every trial: `trials.csv`, `trials.json`; learning curves: `curves.png`.", ""]
     report = out / "report.md"
     report.write_text("\n".join(lines), encoding="utf-8")
     plot_curves(out / "curves.png", ordered)
