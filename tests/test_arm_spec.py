@@ -142,3 +142,15 @@ def test_each_task_ships_its_own_zoo_hyperparameters(tmp_path: Path) -> None:
         assert merged["armreach/Grasp-v0"]["batch_size"] == 512
     with pytest.raises(ConfigError, match="ships no rl-zoo3"):
         hyperparams_path("no-such-task")
+
+
+def test_a_run_config_records_its_arm_as_one_spec() -> None:
+    pytest.importorskip("stable_baselines3")
+    from armreach_core.rl.config import RunConfig, resolve_config
+
+    config = resolve_config(
+        algo="ppo", preset="fast", urdf=str(AR6), ee_link="tool0", placement={"base_position": (0.0, 0.0, 0.2)}
+    )
+    record = config.to_dict()["arm"]
+    assert ArmSpec.from_mapping(record) == config.arm == ArmSpec.create(AR6, "tool0", base_position=(0, 0, 0.2))
+    assert RunConfig.from_dict(config.to_dict()) == config  # derived: not read back as an extra key

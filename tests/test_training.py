@@ -499,7 +499,8 @@ def test_a_run_folder_in_todays_format_reads_back_evaluates_and_resumes(tmp_path
     assert main(["train", "--resume", str(run_dir), "--steps", "250"]) == 0
     assert json.loads((run_dir / "checkpoint.json").read_text())["timesteps"] == 250
     rewritten = yaml.safe_load((run_dir / "config.yaml").read_text())
-    assert rewritten == {**yaml.safe_load(todays), "timesteps": 250, "note": "by hand"}
+    # the derived arm record is written with the rest
+    assert rewritten == {**yaml.safe_load(todays), "timesteps": 250, "arm": {}, "note": "by hand"}
 
 
 def test_optional_config_keys_take_the_defaults_new_runs_record() -> None:
