@@ -258,29 +258,6 @@ def test_installed_plugin_distribution_is_disabled_by_the_env_var(installed_toy)
     assert sorted(by_distribution["disabled"]) == ["toy", "toy-broken"]
 
 
-@pytest.mark.skipif(not BACKENDS, reason="no physics backend installed")
-def test_the_copy_me_task_template_works(monkeypatch):
-    tomllib = pytest.importorskip("tomllib")
-    from gymnasium.utils.env_checker import check_env
-
-    template = Path(__file__).resolve().parents[1] / "tasks" / "template"
-    project = tomllib.loads((template / "pyproject.toml").read_text())
-    (entry_point,) = project["project"]["entry-points"]["armreach"].items()
-    monkeypatch.syspath_prepend(str(template))
-    plugin = __import__(entry_point[1], fromlist=["armreach_register_tasks"])
-    armreach_core.register_plugin(plugin, name=entry_point[0])
-    try:
-        env = gym.make("armreach/MyTask-v0", backend=BACKENDS[0], height=0.25)
-        check_env(env.unwrapped, skip_render_check=True)
-        obs, info = env.reset(seed=0)
-        assert obs[-1] == pytest.approx(0.25) and info["is_success"] is False
-        env.close()
-    finally:
-        armreach_core.unregister_plugin(entry_point[0])
-        for name in [m for m in sys.modules if m.startswith("armreach_mytask")]:
-            monkeypatch.delitem(sys.modules, name)
-
-
 def test_a_task_plugin_ships_presets_found_by_name(tmp_path):
     """A preset a task plugin ships (TaskSpec.presets) is found by its name, as the grasp plugin's is;
     armreach's own presets keep their names."""
