@@ -28,9 +28,3 @@ def test_rollout_saves_png_and_reports_success(tmp_path, capsys, backend):
     assert image.ndim == 3
     assert image.shape[0] == 360
     assert image.std() > 5  # not a blank frame
-
-
-def test_cli_reports_errors_without_a_traceback(tmp_path, capsys):
-    status = main(["rollout", "--urdf", str(tmp_path / "missing.urdf"), "--out", str(tmp_path / "o")])
-    assert status == 2
-    assert "URDF file not found" in capsys.readouterr().err

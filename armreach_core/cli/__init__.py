@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from armreach_core.cli import (
     bench,
@@ -25,22 +26,47 @@ from armreach_core.errors import ArmReachError
 COMMANDS = (train, evaluate, robustness, experiment, sweep, tune, rollout, robot, parity, bench, soak, plugins)
 
 
+class Parser(argparse.ArgumentParser):
+    """A parser whose errors are one line that names the problem and where the fix is.
+
+    ``armreach train: error: argument --seed: invalid int value: 'x' (see `armreach train --help`)``,
+    exit status 2, with no usage block above it. The sub-commands' parsers are of this class too.
+    """
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {one_line(message)} (see `{self.prog} --help`)\n")
+
+
+def one_line(message: str) -> str:
+    """``message`` on one line: its lines joined, blank lines and ``^`` pointer lines left out."""
+    lines = [line.strip() for line in message.splitlines()]
+    return " ".join(line for line in lines if line.strip("^ "))
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="armreach", description="Reinforcement learning on URDF robot arms.")
+    parser = Parser(prog="armreach", description="Reinforcement learning on URDF robot arms.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for command in COMMANDS:
         command.add_parser(sub)
+    for command_parser in sub.choices.values():
+        command_parser.set_defaults(command_parser=command_parser)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``armreach`` script; returns the exit status."""
-    args = build_parser().parse_args(argv)
+    """Entry point of the ``armreach`` script; returns the exit status.
+
+    A command line the parser refuses exits with status 2 (``SystemExit``), an error armreach
+    explains returns 2; either way one line on stderr says what is wrong.
+    """
+    args, unknown = build_parser().parse_known_args(argv)
+    if unknown:  # named by the sub-command, whose --help lists what it takes
+        args.command_parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     args.command_line = ["armreach", *(sys.argv[1:] if argv is None else argv)]
     try:
         status: int = args.run(args)
     except ArmReachError as exc:
-        print(f"armreach: error: {exc}", file=sys.stderr)
+        print(f"armreach: error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("armreach: interrupted", file=sys.stderr)

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.checks import check_out
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 
 
@@ -35,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
     from armreach_core.diagnostics.installed import installed_backends
     from armreach_core.errors import ConfigError
 
+    check_out(args.out)
     backends = args.backends or installed_backends()
     check_backends(backends)
     from armreach_core.rl.learners import ALGORITHMS, LEARNERS

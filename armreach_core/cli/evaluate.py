@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.checks import check_out
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 
 
@@ -40,6 +41,7 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from armreach_core.rl.evaluate import evaluate_run, format_summary, log_to_tensorboard, save_evaluation
 
+    check_out(args.out)
     evaluation = evaluate_run(
         args.run_dir,
         episodes=args.episodes,

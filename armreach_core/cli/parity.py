@@ -7,6 +7,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.checks import (
+    add_arms_argument,
+    check_backends,
+    check_corpus_flags,
+    check_counts,
+    check_out,
+    on_arms,
+)
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 
 
@@ -28,6 +36,7 @@ def add_parser(sub: Any) -> None:
     parser.add_argument(
         "--corpus", action="store_true", help="every installed arm of the corpus: one folder each and one table"
     )
+    add_arms_argument(parser)
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: runs/parity-<time>)")
     parser.set_defaults(run=run)
 
@@ -36,6 +45,10 @@ def run(args: argparse.Namespace) -> int:
     from armreach_core.diagnostics.parity import run_parity
     from armreach_core.diagnostics.parity_report import save_report, summary_lines
 
+    check_corpus_flags(args, args.urdf)
+    check_counts(steps=(args.steps, 1), configs=(args.configs, 1))
+    check_backends(args.backends)
+    check_out(args.out)
     if args.corpus:
         return _corpus(args)
     robot = robot_kwargs(args)
@@ -51,12 +64,24 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _corpus(args: argparse.Namespace) -> int:
-    """Parity over every installed corpus arm: one folder per arm and one table (markdown and JSON)."""
-    from armreach_core.diagnostics.parity import run_parity_corpus
-    from armreach_core.diagnostics.parity_report import save_corpus
+    """Parity over the installed corpus arms (all, or --arms): one folder per arm and one table (markdown and JSON)."""
+    from armreach_core.diagnostics.corpus import CorpusArm
+    from armreach_core.diagnostics.parity import run_parity, run_parity_corpus
+    from armreach_core.diagnostics.parity_report import corpus_row, save_corpus, save_report
 
     out: Path = args.out or Path("runs") / time.strftime("parity-corpus-%Y%m%d-%H%M%S")
-    rows = run_parity_corpus(out, args.backends, steps=args.steps, configs=args.configs, seed=args.seed)
+    if args.arms is None:
+        rows = run_parity_corpus(out, args.backends, steps=args.steps, configs=args.configs, seed=args.seed)
+    else:
+
+        def one(arm: CorpusArm, urdf: Path) -> dict[str, Any]:
+            report = run_parity(args.backends, str(urdf), steps=args.steps, configs=args.configs, seed=args.seed)
+            save_report(report, out / arm.name)
+            failures = report.failures()
+            print(f"{arm.name}: {'pass' if not failures else 'fail: ' + '; '.join(failures)}")
+            return corpus_row(report)
+
+        rows = on_arms(args.arms, one)
     table, saved = save_corpus(rows, out, steps=args.steps, seed=args.seed)
     print(table)
     print(f"saved {saved[0]}, {saved[1]} and one folder per arm")

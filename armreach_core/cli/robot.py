@@ -8,6 +8,15 @@ import time
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.checks import (
+    add_arms_argument,
+    check_backends,
+    check_corpus_flags,
+    check_counts,
+    check_out,
+    check_urdf,
+    on_arms,
+)
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 
 
@@ -28,15 +37,23 @@ def add_parser(sub: Any) -> None:
         action="store_true",
         help="check every installed arm of the corpus (armreach_core/diagnostics/corpus.py) instead",
     )
+    add_arms_argument(parser)
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    """Exit 0: usable; 1: the arm was checked and cannot be used as it is (the page says why);
+    2: the command line is wrong (no such file, not a URDF, an unknown backend), with nothing written."""
     from armreach_core.diagnostics.robot_page import markdown, save_robot
     from armreach_core.diagnostics.robot_report import inspect_robot
 
+    check_corpus_flags(args, args.urdf)
+    check_counts(steps=(args.steps, 1), ik_episodes=(args.ik_episodes, 1), parity_steps=(args.parity_steps, 0))
+    check_backends(args.backends)
+    check_out(args.out)
     if args.corpus:
         return _corpus(args)
+    check_urdf(args.urdf)
     kwargs = robot_kwargs(args)
     report = inspect_robot(
         args.urdf,
@@ -55,18 +72,30 @@ def run(args: argparse.Namespace) -> int:
 
 def _corpus(args: argparse.Namespace) -> int:
     """One line per corpus arm: home clearance, determinism, memory, steps/s and IK success per engine."""
+    from armreach_core.diagnostics.corpus import CorpusArm
     from armreach_core.diagnostics.robot_page import save_corpus
-    from armreach_core.diagnostics.robot_report import inspect_corpus
+    from armreach_core.diagnostics.robot_report import RobotReport, inspect_corpus, inspect_robot
 
+    options: dict[str, Any] = {
+        "env_kwargs": robot_kwargs(args),
+        "backends": args.backends,
+        "steps": args.steps,
+        "ik_episodes": args.ik_episodes,
+        "parity_steps": args.parity_steps,
+    }
     out: Path = args.out or Path("runs") / time.strftime("robot-corpus-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
-    reports = inspect_corpus(
-        env_kwargs=robot_kwargs(args),
-        backends=args.backends,
-        steps=args.steps,
-        ik_episodes=args.ik_episodes,
-        parity_steps=args.parity_steps,
-    )
+    if args.arms is None:
+        reports = inspect_corpus(**options)
+    else:
+
+        def one(arm: CorpusArm, urdf: Path) -> RobotReport:
+            started = time.perf_counter()
+            report = inspect_robot(str(urdf), **options)
+            print(f"{arm.name}: {'usable' if report.usable else 'NOT usable'} ({time.perf_counter() - started:.0f} s)")
+            return report
+
+        reports = on_arms(args.arms, one)
     table, saved = save_corpus(reports, out)
     print(table)
     print(f"saved {saved[0]} and {saved[1]}")

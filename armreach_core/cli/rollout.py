@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.checks import check_out
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 from armreach_core.plugins.defaults import DEFAULT_BACKEND
 
@@ -28,8 +29,7 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from armreach_core.diagnostics.rollout import rollout, save_rollout
 
-    out = args.out or Path("runs") / time.strftime("rollout-%Y%m%d-%H%M%S")
-    out.mkdir(parents=True, exist_ok=True)
+    check_out(args.out)
     result = rollout(
         args.backend,
         policy=args.policy,
@@ -38,7 +38,8 @@ def run(args: argparse.Namespace) -> int:
         viewer=args.viewer,
         env_kwargs=robot_kwargs(args),
     )
-    png, summary_json = save_rollout(result, out)
+    out = args.out or Path("runs") / time.strftime("rollout-%Y%m%d-%H%M%S")
+    png, summary_json = save_rollout(result, out)  # made once the episode ran: an error leaves no folder
     summary = result.summary
     print(
         f"{'success' if summary['is_success'] else 'no success'} after {summary['steps']} steps: "

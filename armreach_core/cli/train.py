@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.checks import check_backends, check_out, check_urdf
 from armreach_core.cli.robot_args import add_robot_arguments
 from armreach_core.errors import ConfigError
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
@@ -76,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
     from armreach_core.rl.config import default_algo, extend, resolve_config
     from armreach_core.rl.train import train
 
+    check_device(args.device)
     if args.resume is not None:
         run_dir: Path = args.resume
         conflicting = [flag for flag, value, default in RESUME_CONFLICTS if getattr(args, value) != default]
@@ -112,6 +114,10 @@ def run(args: argparse.Namespace) -> int:
             placement={key: getattr(args, key) for key in ("home", "base_position", "base_orientation")},
             learner=args.learner,
         )
+        # before the run folder is made: a failing command leaves none behind
+        check_backends([config.backend])
+        check_urdf(config.urdf)
+        check_out(args.out)
         her = "-her" if config.uses_her else ""
         name = [config.algo + her, config.preset, config.backend, f"s{config.seed}"]
         run_dir = args.out or runs.default_run_dir("runs", name)
@@ -146,3 +152,17 @@ def run(args: argparse.Namespace) -> int:
         )
     )
     return 0
+
+
+def check_device(device: str) -> None:
+    """``--device`` is ``auto`` or a device torch knows (``cpu``, ``cuda``, ``cuda:1``...)."""
+    if device == "auto":
+        return
+    try:
+        import torch
+    except ImportError:  # training itself says what to install
+        return
+    try:
+        torch.device(device)
+    except (RuntimeError, ValueError):
+        raise ConfigError(f"--device {device!r} is not a torch device; use auto, cpu or cuda[:N]") from None
