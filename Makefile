@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install system-deps test test-no-mujoco test-all lint demo bench clean
+.PHONY: install system-deps test test-slow test-no-mujoco test-py310 test-all lint demo bench clean
 
 $(STAMP): pyproject.toml backends/pybullet/pyproject.toml backends/mujoco/pyproject.toml tasks/grasp/pyproject.toml constraints-cpu.txt
 	$(PYTHON) -m venv $(VENV)
@@ -24,13 +24,31 @@ system-deps:
 
 install: $(STAMP) system-deps
 
+# The everyday suite: a few minutes. Long integration runs (Ray sweeps, rl-zoo3, resumed
+# trainings, every corpus arm) are marked slow and run by `make test-slow` (CI's second step).
 test: $(STAMP) system-deps
 	$(BIN)/python -m pytest -m "not slow" -q
+
+test-slow: $(STAMP) system-deps
+	$(BIN)/python -m pytest -m slow -q
 
 # The same suite with mujoco unimportable: MuJoCo is optional, so everything else must pass without it.
 # Training tests use PyBullet only and already ran in `make test`.
 test-no-mujoco: $(STAMP)
 	ARMREACH_TEST_HIDE=mujoco $(BIN)/python -m pytest -m "not slow and not training" -q
+
+# The env, its checks and the plugins on the oldest Python armreach supports (3.10), where one
+# is installed: core, PyBullet and grasp, no training stack (the CPU torch wheel is 3.11's).
+PY310 ?= $(shell command -v python3.10 2>/dev/null || ls $$(pyenv root 2>/dev/null)/versions/3.10*/bin/python3.10 2>/dev/null | tail -1)
+VENV310 ?= .venv310
+test-py310:
+	@if [ -z "$(PY310)" ]; then echo "no python3.10 here: skipping the 3.10 run"; exit 0; fi; \
+	if [ ! -f $(VENV310)/.installed ] || [ pyproject.toml -nt $(VENV310)/.installed ]; then \
+		$(PY310) -m venv $(VENV310) && $(VENV310)/bin/python -m pip install --quiet --upgrade pip && \
+		$(VENV310)/bin/python -m pip install --quiet -e ".[dev]" -e backends/pybullet -e tasks/grasp && \
+		touch $(VENV310)/.installed; \
+	fi; \
+	$(VENV310)/bin/python -m pytest -m "not slow and not training" -q -p no:cacheprovider
 
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q
@@ -47,4 +65,4 @@ demo: $(STAMP)
 	$(BIN)/armreach experiment paper --seeds 1 --steps 10000 --steps fast-ppo=114688 --episodes 20 --fast --out runs/demo
 
 clean:
-	rm -rf $(VENV) build dist *.egg-info runs .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) $(VENV310) build dist *.egg-info runs .pytest_cache .mypy_cache .ruff_cache

@@ -34,9 +34,9 @@ from typing import Any
 
 from armreach_core.errors import ConfigError
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
-from armreach_core.robot.spec import ArmSpec
 from armreach_core.rl.learners import LEGACY_LEARNER, check_learner, check_settings, default_learner
 from armreach_core.rl.presets import ALGOS, OFF_POLICY, RL_ALGOS, load_preset, validate_settings
+from armreach_core.robot.spec import ArmSpec
 
 #: Steps between periodic checkpoints when the preset sets no ``checkpoint_every``.
 DEFAULT_CHECKPOINT_EVERY = 10_000
