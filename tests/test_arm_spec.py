@@ -15,7 +15,6 @@ from armreach_core import ConfigError, TaskSpec, hookimpl
 from armreach_core.env import ArmEnv
 from armreach_core.plugins.lookup import resolve_arm
 from armreach_core.plugins.specs import resolve
-from armreach_core.rl.zoo import hyperparams_path, task_hyperparams
 from armreach_core.robot.bundled import asset_path
 from armreach_core.robot.factory import build_robot
 from armreach_core.robot.spec import ArmSpec
@@ -132,6 +131,9 @@ def test_a_deprecated_id_still_makes_its_env_and_warns_naming_the_new_one() -> N
 
 
 def test_each_task_ships_its_own_zoo_hyperparameters(tmp_path: Path) -> None:
+    pytest.importorskip("stable_baselines3")  # armreach_core.rl needs the rl extra
+    from armreach_core.rl.zoo import hyperparams_path, task_hyperparams
+
     files = task_hyperparams()
     assert set(yaml.safe_load(files["reach"].read_text())) == {"armreach/Reach-v0"}
     merged = yaml.safe_load(hyperparams_path(folder=tmp_path).read_text())
