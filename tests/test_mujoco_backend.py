@@ -1,4 +1,9 @@
-"""MuJoCo specifics: the same URDF as PyBullet, kinematic and dynamic parity, caching, rendering, close."""
+"""MuJoCo specifics: the same URDF as PyBullet, kinematic parity, caching, rendering, memory, close.
+
+The engines' dynamic gaps (``armreach parity``'s sequences, per arm and seed) are held in
+tests/test_parity.py. Bounds here sit 2-3 times over what was measured, with the
+measurement next to each.
+"""
 
 from __future__ import annotations
 
@@ -15,7 +20,7 @@ import pytest
 
 from armreach_core import ArmEnv, ArmReach6DOFEnv, URDFError
 from armreach_core.backend import Camera, PhysicsConfig
-from armreach_core.diagnostics import parity
+from armreach_core.diagnostics.soak import Bounds, soak_backend
 from armreach_core.robot.ik import IKPolicy
 from armreach_core.robot.model import RobotModel
 
@@ -27,17 +32,6 @@ world = pytest.importorskip("armreach_mujoco.world")
 pytestmark = pytest.mark.mujoco
 
 AR6_HOME = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
-#: Honest bounds on the PyBullet-MuJoCo gap over 200 control steps from home, seed 0, with
-#: the sequences of ``armreach parity`` (measured values in the comments; see
-#: docs/mujoco-backend.md). In free space the engines agree to a fraction of a millimetre;
-#: ar6's random sequence reaches the ground at step 137, and contact is where they part.
-DYNAMIC_BOUNDS = {
-    # (arm, sequence): (joint RMS rad, EE RMS m)
-    ("ar6", "random"): (0.008, 0.006),  # measured 0.0045 rad, 3.9 mm (0.26 mm before the contact)
-    ("ar6", "scripted"): (0.001, 0.0001),  # measured 0.0004 rad, 0.001 mm
-    ("xarm6", "random"): (0.001, 0.0005),  # measured 0.0002 rad, 0.16 mm
-    ("xarm6", "scripted"): (0.001, 0.0001),  # measured 0.0002 rad, 0.004 mm (was 0.09 mm aimed at the target)
-}
 
 
 @pytest.fixture(scope="module")
@@ -68,15 +62,22 @@ def test_every_urdf_link_is_a_body_and_markers_are_visual_only(arms):
     backend.close()
 
 
+#: The largest coordinate error of the end effector against the URDF's forward kinematics over
+#: 1,000 random configurations, ar6 and xArm6, seeds 7 and 8: MuJoCo 6.7e-16 m (its kinematics are
+#: the URDF's, to rounding), PyBullet 8.2e-8 m (xArm6, seed 7). Measured with the test's loop.
+FK_ERROR_M = {"mujoco": 2e-15, "pybullet": 2e-7}
+
+
+@pytest.mark.parametrize("seed", [7, 8])
 @pytest.mark.parametrize("arm", ["ar6", "xarm6"])
-def test_forward_kinematics_parity_with_pybullet_and_urdf(arms, arm):
+def test_forward_kinematics_parity_with_pybullet_and_urdf(arms, arm, seed):
     pytest.importorskip("pybullet")
     from armreach_pybullet.backend import PyBulletBackend
 
     robot = arms[arm]
     physics = PhysicsConfig()
     mj, pb = mjb.MuJoCoBackend(robot, physics), PyBulletBackend(robot, physics)
-    configs = robot.sample_configurations(np.random.default_rng(7), 1000)
+    configs = robot.sample_configurations(np.random.default_rng(seed), 500)
     reference = robot.forward_kinematics(configs)
     worst_mj = worst_pb = 0.0
     for q, expected in zip(configs, reference, strict=True):
@@ -86,23 +87,8 @@ def test_forward_kinematics_parity_with_pybullet_and_urdf(arms, arm):
         worst_pb = max(worst_pb, float(np.abs(pb.link_position(robot.ee_link) - expected).max()))
     mj.close()
     pb.close()
-    assert worst_mj < 1e-6, f"MuJoCo FK differs from the URDF by {worst_mj:.2e} m"
-    assert worst_pb < 1e-6, f"PyBullet FK differs from the URDF by {worst_pb:.2e} m"
-
-
-@pytest.mark.parametrize(("arm", "sequence"), sorted(DYNAMIC_BOUNDS))
-def test_position_control_tracks_pybullet(xarm_urdf, arm, sequence):
-    pytest.importorskip("pybullet")
-    urdf = None if arm == "ar6" else xarm_urdf
-    runs = {}
-    for name in ("pybullet", "mujoco"):
-        env = ArmEnv("reach", backend=name, urdf=urdf)
-        runs[name] = parity.drive(env, sequence, steps=200, seed=0)
-        env.close()
-    gap = parity.Gap.between(runs["pybullet"], runs["mujoco"])
-    joint_bound, ee_bound = DYNAMIC_BOUNDS[(arm, sequence)]
-    assert gap.joint_rms_rad < joint_bound, f"joint RMS gap {gap.joint_rms_rad:.4f} rad"
-    assert gap.ee_rms_m < ee_bound, f"end-effector RMS gap {gap.ee_rms_m * 1000:.1f} mm"
+    assert worst_mj <= FK_ERROR_M["mujoco"], f"MuJoCo FK differs from the URDF by {worst_mj:.2e} m"
+    assert worst_pb <= FK_ERROR_M["pybullet"], f"PyBullet FK differs from the URDF by {worst_pb:.2e} m"
 
 
 def test_both_engines_bound_the_damping_of_light_joints_alike():
@@ -116,54 +102,35 @@ def test_both_engines_bound_the_damping_of_light_joints_alike():
         dampings[name] = np.array([env.backend.joint_damping(j) for j in env.robot.joint_names])
         urdf = np.array([j.damping for j in env.robot.joints])
         env.close()
-    np.testing.assert_allclose(dampings["pybullet"], dampings["mujoco"], rtol=1e-9)
+    # measured 8.4e-14 apart: the two engines' M_ii, summed in different orders
+    np.testing.assert_allclose(dampings["pybullet"], dampings["mujoco"], rtol=2.5e-13, atol=0)
     bounded = dampings["mujoco"] < urdf
     assert bounded[-1] and not bounded[:4].any()  # wrist 3: 0.5 -> 0.02; shoulder to wrist 1: 0.5
-
-
-#: Contact phases of ar6, seed 0 (the parity report's sequences): measured, in the comments.
-CONTACT_BOUNDS = {
-    # sequence: (first contact step on both engines, contact-phase EE RMS bound m)
-    "biased": (27, 0.012),  # 9.5 mm (before the motor of PyBullet's kind: 124 mm)
-    "press": (38, 0.003),  # 1.1 mm (the aim descends at 0.25 m/s from home)
-}
-
-
-@pytest.mark.parametrize("sequence", sorted(CONTACT_BOUNDS))
-def test_contact_phase_tracks_pybullet(sequence):
-    pytest.importorskip("pybullet")
-    runs = {}
-    for name in ("pybullet", "mujoco"):
-        env = ArmEnv("reach", backend=name)
-        runs[name] = parity.drive(env, sequence, steps=200, seed=0)
-        env.close()
-    first, bound = CONTACT_BOUNDS[sequence]
-    assert runs["pybullet"].first_contact == runs["mujoco"].first_contact == first
-    assert runs["pybullet"].first_contact_links == runs["mujoco"].first_contact_links
-    gap = parity.Gap.between(runs["pybullet"], runs["mujoco"])
-    assert gap.contact_step == first
-    assert gap.free_ee_rms_m is not None and gap.free_ee_rms_m < 0.001
-    assert gap.contact_ee_rms_m is not None and gap.contact_ee_rms_m < bound
 
 
 def test_motor_rows_are_the_last_friction_rows():
     """Motors.step writes the reference of the last friction rows: they must be the motor tendons,
     in motor order, with boxes, mimic equalities and joint friction in the model too."""
-    grasp = pytest.importorskip("armreach_grasp")
+    pytest.importorskip("armreach_grasp")
     env = ArmEnv("grasp", backend="mujoco")
     env.reset(seed=0)
     backend = env.backend
     backend.set_joint_friction(backend.robot.joint_names[0], 0.5)  # a dof friction row before them
     model, data, shared = backend.model, backend.data, backend.compiled
+    from armreach_mujoco.servo import MOTOR_PREFIX
+
     motors = np.concatenate((shared.motors, shared.held_motors))
-    assert len(motors) == len(backend._io.motors.qvel)
+    # one motor per actuated joint and per held joint with a servo of its own, in that order
+    assert len(shared.motors) == backend.robot.dof and len(shared.held_motors) == len(shared.held_servos)
+    names = [model.tendon(m).name for m in motors]
+    held = [backend.robot.held_joints[i].name for i in shared.held_servos]
+    assert names == [MOTOR_PREFIX + joint for joint in (*backend.robot.joint_names, *held)]
     mujoco.mj_step1(model, data)
     first = data.ne + data.nf - len(motors)
     rows = slice(first, first + len(motors))
     assert np.all(data.efc_type[rows] == mujoco.mjtConstraint.mjCNSTR_FRICTION_TENDON)
     np.testing.assert_array_equal(data.efc_id[rows], motors)
     np.testing.assert_allclose(data.efc_frictionloss[rows], model.tendon_frictionloss[motors])
-    assert grasp is not None
     env.close()
 
 
@@ -184,8 +151,10 @@ def test_a_motor_pushes_with_its_effort_and_no_more():
             env.backend.step()
         finals[name] = env.backend.read_state().q
         env.close()
-    assert abs(finals["pybullet"][joint] - env.robot.home[joint]) > 0.05  # it sagged
-    np.testing.assert_allclose(finals["mujoco"], finals["pybullet"], atol=2e-3)
+    # measured: PyBullet's joint sags 0.720 rad, MuJoCo's 0.721; the engines end 1.63e-3 rad apart
+    sag = abs(finals["pybullet"][joint] - env.robot.home[joint])
+    assert 0.36 < sag < 1.44, f"sagged {sag:.3f} rad"
+    np.testing.assert_allclose(finals["mujoco"], finals["pybullet"], rtol=0, atol=3e-3)
 
 
 def test_contact_friction_is_bullets_product():
@@ -241,35 +210,62 @@ def test_links_in_contact_agree_with_pybullet():
     assert touching["pybullet"] == touching["mujoco"] and touching["mujoco"][1]
 
 
-def test_scripted_reach_succeeds():
+@pytest.mark.parametrize("seed", [0, 1])
+def test_scripted_reach_succeeds(seed):
+    """The IK policy reaches the target: measured in 12 and 17 steps (seeds 0 and 1)."""
     env = ArmReach6DOFEnv(backend="mujoco")
-    obs, info = env.reset(seed=0)
+    obs, info = env.reset(seed=seed)
     robot = env.unwrapped.robot
     policy = IKPolicy(robot, env.unwrapped.max_joint_step)
-    for _ in range(200):
+    for _ in range(40):
         obs, _, terminated, _, info = env.step(policy.act(obs[:6], obs[9:12]))
         if terminated:
             break
-    assert info["is_success"], f"IK reach ended {info['distance']:.3f} m from the target"
     env.close()
+    assert info["is_success"], f"IK reach ended {info['distance']:.3f} m from the target after 40 steps"
 
 
-def test_holds_home_pose_against_gravity():
+@pytest.mark.parametrize("seed", [0, 1])
+def test_holds_home_pose_against_gravity(seed):
     env = ArmReach6DOFEnv(backend="mujoco")
-    env.reset(seed=0)
+    env.reset(seed=seed)
     for _ in range(50):
         obs, *_ = env.step(np.zeros(6, dtype=np.float32))
-    np.testing.assert_allclose(obs[:6], env.unwrapped.robot.home, atol=2e-3)
+    # measured 4.7e-5 rad off home after 50 steps (seeds 0 and 1)
+    np.testing.assert_allclose(obs[:6], env.unwrapped.robot.home, rtol=0, atol=1.2e-4)
     env.close()
 
 
 def test_env_creation_is_cached_and_cheap():
-    ArmReach6DOFEnv(backend="mujoco").close()
-    start = time.perf_counter()
-    for _ in range(10):
+    """An env of an arm already compiled skips the compile: measured 1.3-1.6 ms against 5.3-6.1 ms
+    after ``compiled.clear_cache()`` (3.8-4.0 times as long), three runs of this test's timing."""
+
+    def build_seconds(clear: bool) -> float:
+        if clear:
+            compiled.clear_cache()
+        start = time.perf_counter()
         ArmReach6DOFEnv(backend="mujoco").close()
-    per_env = (time.perf_counter() - start) / 10
-    assert per_env < 0.05, f"creating a cached env took {per_env * 1000:.1f} ms"
+        return time.perf_counter() - start
+
+    uncached = min(build_seconds(clear=True) for _ in range(3))
+    cached = sum(build_seconds(clear=False) for _ in range(10)) / 10
+    assert cached * 1.3 < uncached, f"a cached env took {cached * 1e3:.2f} ms, an uncached one {uncached * 1e3:.2f} ms"
+
+
+#: RSS growth over 30 MuJoCo env create/reset/step/close cycles after soak's warm-up: measured
+#: +0.00 MB over 30, 100 and 300 cycles with seeds 0, 1 and 2 (``soak_backend("mujoco", steps=0,
+#: cycles=30, seed=s).cycles.rss_growth_mb``), where RSS moves in allocator steps (-1.36 MB seen in
+#: a fresh process). An env left open holds 0.4 MB: never closing them grows RSS by 11-13 MB over
+#: the same 30 cycles, which the bound catches.
+CYCLE_RSS_MB = 2.0
+
+
+def test_create_close_cycles_keep_memory_flat():
+    report = soak_backend("mujoco", steps=0, cycles=30, seed=0, bounds=Bounds(cycles_rss_mb=CYCLE_RSS_MB))
+    cycles = report.cycles
+    assert cycles is not None and cycles.cycles == 30
+    assert report.passed, report.failures
+    assert cycles.fds_growth == 0
 
 
 def test_self_collision_switch(ar6_urdf):
@@ -300,12 +296,13 @@ def test_close_is_idempotent_and_isolated():
     env_b.close()
 
 
-def test_read_state_is_one_snapshot():
+@pytest.mark.parametrize("seed", [0, 1])
+def test_read_state_is_one_snapshot(seed):
     """The end effector comes from the joint angles read with it (links brought up to qpos after the step)."""
     env = ArmReach6DOFEnv(backend="mujoco")
     robot, backend = env.unwrapped.robot, env.unwrapped.backend
-    obs, _ = env.reset(seed=0)
-    env.action_space.seed(0)
+    obs, _ = env.reset(seed=seed)
+    env.action_space.seed(seed)
     worst = 0.0
     for _ in range(50):
         obs, *_ = env.step(env.action_space.sample())
@@ -313,7 +310,8 @@ def test_read_state_is_one_snapshot():
         np.testing.assert_array_equal(obs[6:9], state.ee_pos.astype(np.float32))
         worst = max(worst, float(np.abs(state.ee_pos - robot.forward_kinematics(state.q)).max()))
     env.close()
-    assert worst < 1e-9, f"the end effector differs from the URDF kinematics of q by {worst:.2e} m"
+    # measured 3.3e-16 m (seeds 0 and 1 of the actions)
+    assert worst <= 1e-15, f"the end effector differs from the URDF kinematics of q by {worst:.2e} m"
 
 
 def _model_bytes(model) -> bytes:
@@ -365,6 +363,9 @@ MESH_LINKS = (
     ("link2", "../meshes/upper.{ext}", (0.08, 0.08, 0.2), 0.1),  # relative to the URDF's folder
     ("link3", "package://testarm/meshes/fore.{ext}", (0.06, 0.06, 0.2), 0.1),
 )
+#: The mesh arm's end effector against the URDF's kinematics, after steps and over configurations
+#: (seeds 7 and 8): measured MuJoCo 2.2e-16 m, PyBullet 2.7e-8 m (the test's loops, printing the max).
+MESH_FK_ERROR_M = {"mujoco": 6e-16, "pybullet": 7e-8}
 #: A PLY file that trimesh parses but that holds no surface.
 EMPTY_PLY = (
     b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\n"
@@ -468,10 +469,12 @@ def test_meshes_mujoco_cannot_read_are_converted_and_cached(tmp_path, mesh_cache
             obs, reward, *_ = env.step(env.action_space.sample())
             assert np.isfinite(obs).all() and np.isfinite(reward)
             q, _ = backend.joint_state()
-            np.testing.assert_allclose(backend.link_position("tool0"), robot.forward_kinematics(q), rtol=0, atol=1e-6)
+            np.testing.assert_allclose(
+                backend.link_position("tool0"), robot.forward_kinematics(q), rtol=0, atol=MESH_FK_ERROR_M[name]
+            )
         configs = np.vstack([robot.home, robot.sample_configurations(np.random.default_rng(7), 8)])
         worst = _worst_fk_error(backend, robot, configs)
-        assert worst < 1e-6, f"{name} FK differs from the URDF by {worst:.2e} m"
+        assert worst <= MESH_FK_ERROR_M[name], f"{name} FK differs from the URDF by {worst:.2e} m"
         if name == "mujoco":
             model = backend.model
             assert model.nmesh == 6  # three visual meshes and their three convex hulls for collisions
@@ -518,24 +521,49 @@ def test_unreadable_mesh_is_a_urdf_error_naming_the_file(tmp_path, mesh_cache, e
     assert not list(mesh_cache.glob(f"{stem}-*"))  # nothing half-written is left to be reused
 
 
-def test_motor_step_gathers_the_same_as_it_views(monkeypatch):
-    """Motors.step reads joint states through views when the motor joints are contiguous, by
-    gathering otherwise: both give the same physics, bit for bit."""
-    servo = pytest.importorskip("armreach_mujoco.servo")
+#: Two fingers under the hand of tests.test_robot's arm: ``a`` actuated (a tool joint), ``b`` following it.
+FINGER_A = (
+    '<joint name="a" type="prismatic"><parent link="hand"/><child link="left"/>'
+    '<limit lower="0.01" upper="0.04" effort="5" velocity="1"/></joint>'
+)
+FINGER_B = (
+    '<joint name="b" type="prismatic"><parent link="hand"/><child link="right"/>'
+    '<limit lower="-0.1" upper="0.1" effort="5" velocity="1"/><mimic joint="a" multiplier="-2" offset="0.03"/></joint>'
+)
 
-    def run() -> np.ndarray:
-        env = ArmEnv("reach", backend="mujoco")
-        env.reset(seed=0)
-        rng = np.random.default_rng(0)
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_the_motor_joints_layout_in_the_state_does_not_change_the_physics(tmp_path, seed):
+    """The same arm written with its fingers in either order: with ``a`` first the motor joints
+    are contiguous in ``qpos`` (the motors read views of the state), with ``b`` first they are
+    not (the motors gather them). The motion is the same to rounding: measured 3.9e-15 (seed 0)
+    and 5.7e-15 (seed 1) apart over 30 steps, printing the largest difference below."""
+    from tests.test_robot import _arm
+
+    runs, layouts = {}, {}
+    for order, tail, links in (
+        ("ab", FINGER_A + FINGER_B, ("left", "right")),
+        ("ba", FINGER_B + FINGER_A, ("right", "left")),
+    ):
+        folder = tmp_path / order
+        folder.mkdir()
+        robot = RobotModel(_arm(folder, tail, links), home=[0.1, 0.2, 0.3, 0.02], tool_joints=("a",))
+        backend = mjb.MuJoCoBackend(robot, PhysicsConfig())
+        shared = backend.compiled
+        layouts[order] = np.concatenate((shared.qpos, shared.held_qpos[shared.held_servos]))
+        backend.reset_joints(robot.home)
+        rng = np.random.default_rng(seed)
+        states = []
         for _ in range(30):
-            env.step(rng.uniform(-1, 1, env.robot.dof))
-        q = env.backend.read_state().q
-        env.close()
-        return q
-
-    viewed = run()
-    monkeypatch.setattr(servo, "_contiguous", lambda index: index)
-    np.testing.assert_array_equal(run(), viewed)
+            backend.set_joint_targets(robot.clip(backend.joint_state()[0] + rng.uniform(-0.05, 0.05, robot.dof)))
+            backend.step()
+            states.append(np.concatenate(backend.joint_state()))
+        backend.close()
+        runs[order] = np.array(states)
+    np.testing.assert_array_equal(layouts["ab"], [0, 1, 2, 3])  # contiguous
+    np.testing.assert_array_equal(layouts["ba"], [0, 1, 2, 4])  # b's slot in between
+    assert np.ptp(runs["ab"][:, :4], axis=0).min() > 0.01  # every motor joint moved
+    np.testing.assert_allclose(runs["ba"], runs["ab"], rtol=0, atol=1.5e-14)
 
 
 def test_a_mimic_follows_an_actuated_master_and_has_its_own_motor_otherwise(tmp_path):

@@ -12,6 +12,8 @@ import json
 import math
 import subprocess
 import sys
+from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pytest
@@ -19,7 +21,9 @@ import pytest
 from armreach_core import ArmReach6DOFEnv, BackendUnavailableError
 from armreach_core.backend import ArmState
 from armreach_core.cli import main
-from armreach_core.diagnostics.parity import JERK_SEQUENCES, OPEN_LOOP, SEQUENCES
+from armreach_core.diagnostics.corpus import CORPUS, corpus_arm
+from armreach_core.diagnostics.parity import JERK_SEQUENCES, OPEN_LOOP, SEQUENCES, ParityReport, run_parity
+from armreach_core.env import ArmEnv
 from tests.conftest import BACKENDS
 
 PAIR = ("pybullet", "mujoco")
@@ -53,11 +57,12 @@ def test_reset_gives_the_same_target_observation_and_info(seed):
     (obs_a, info_a), (obs_b, info_b) = (env.reset(seed=seed) for env in envs.values())
     tasks = [env.unwrapped.task for env in envs.values()]
     np.testing.assert_array_equal(tasks[0].target, tasks[1].target)
-    np.testing.assert_allclose(obs_a, obs_b, rtol=0, atol=1e-6)
+    # measured 1.5e-8 (seeds 0-3; one float32 step of the end effector): the loop of this test, printing the max
+    np.testing.assert_allclose(obs_a, obs_b, rtol=0, atol=6e-8)
     assert info_a.keys() == info_b.keys()
     assert info_a["is_success"] == info_b["is_success"]
     for key in ("distance", "reward_distance", "reward_success"):
-        assert info_a[key] == pytest.approx(info_b[key], abs=1e-6)
+        assert info_a[key] == pytest.approx(info_b[key], abs=1e-7), key  # measured 0 (float32 end effectors)
     _close(envs)
 
 
@@ -89,13 +94,14 @@ def test_the_same_state_scores_identically_on_both_backends():
 
 
 @needs_both
-def test_teleported_arms_score_the_same():
-    """reset_joints(q) on both engines: the end effectors agree to 1e-6 m, so do reward and success."""
+@pytest.mark.parametrize("seed", [3, 4])
+def test_teleported_arms_score_the_same(seed):
+    """reset_joints(q) on both engines: the end effectors agree to 1e-7 m, so do reward and success."""
     envs = _pair()
     for env in envs.values():
         env.reset(seed=0)
     robot = envs["pybullet"].unwrapped.robot
-    rng = np.random.default_rng(3)
+    rng = np.random.default_rng(seed)
     for q in robot.sample_configurations(rng, 40):
         direction = rng.normal(size=3)
         distance = rng.choice([0.0, 0.02, 0.045, 0.055, 0.1, 0.4])  # clear of the 0.05 m threshold by >= 5 mm
@@ -106,15 +112,24 @@ def test_teleported_arms_score_the_same():
             env.unwrapped.backend.reset_joints(q)
             results.append((env.unwrapped.backend.read_state(), env.unwrapped.task))
         (state_a, task_a), (state_b, task_b) = results
-        np.testing.assert_allclose(state_a.ee_pos, state_b.ee_pos, rtol=0, atol=1e-6)
+        # measured 2.9e-8 m (seeds 3, 4): PyBullet's forward kinematics to float32-like precision
+        np.testing.assert_allclose(state_a.ee_pos, state_b.ee_pos, rtol=0, atol=1e-7)
         np.testing.assert_array_equal(state_a.q, state_b.q)
         eval_a, eval_b = task_a.score(state_a), task_b.score(state_b)
         assert eval_a.success == eval_b.success == (distance < 0.05)
-        assert eval_a.reward == pytest.approx(eval_b.reward, abs=1e-5)
+        # measured 0: a reward moves by no more than the end effector does (1e-7 m above)
+        assert eval_a.reward == pytest.approx(eval_b.reward, abs=1e-7)
         assert eval_a.info.keys() == eval_b.info.keys()
         for key, value in eval_a.info.items():
-            assert value == pytest.approx(eval_b.info[key], abs=1e-5), key
+            assert value == pytest.approx(eval_b.info[key], abs=1e-7), key
     _close(envs)
+
+
+#: One step from the same state, the largest PyBullet-MuJoCo gaps over every pose, mode, target and
+#: action of the test below, with the actions drawn from seeds ``pose`` and ``pose + 10``: joint
+#: angles 5.2e-5 rad, end effector 2.8e-5 m, distance 2.6e-5 m, reward 8.0e-6. Measured with
+#: the test's loop printing the largest gaps; the bounds are about 3 times those.
+ONE_STEP_JOINT_RAD, ONE_STEP_EE_M, ONE_STEP_REWARD = 1.5e-4, 8e-5, 2.5e-5
 
 
 @needs_both
@@ -136,18 +151,18 @@ def test_one_step_from_the_same_state_gives_the_same_outputs(pose, joint_limit_m
                 env.unwrapped.task.target = np.array(target)
                 outputs.append(env.step(action.astype(np.float32)))
             (obs_a, reward_a, term_a, trunc_a, info_a), (obs_b, reward_b, term_b, trunc_b, info_b) = outputs
-            np.testing.assert_allclose(obs_a[:6], obs_b[:6], rtol=0, atol=0.01)  # joint angles (rad)
-            np.testing.assert_allclose(obs_a[6:9], obs_b[6:9], rtol=0, atol=0.005)  # end effector (m)
+            np.testing.assert_allclose(obs_a[:6], obs_b[:6], rtol=0, atol=ONE_STEP_JOINT_RAD)  # joint angles
+            np.testing.assert_allclose(obs_a[6:9], obs_b[6:9], rtol=0, atol=ONE_STEP_EE_M)  # end effector
             np.testing.assert_array_equal(obs_a[9:12], obs_b[9:12])  # target
             assert info_a.keys() == info_b.keys()
             assert info_a["joint_limit_violation"] == info_b["joint_limit_violation"]
             violations += info_a["joint_limit_violation"]
-            assert info_a["distance"] == pytest.approx(info_b["distance"], abs=0.005)
-            if min(abs(info_a["distance"] - 0.05), abs(info_b["distance"] - 0.05)) < 0.005:
-                continue  # the engines' 1-2 mm gap may put the two on either side of the success threshold
+            assert info_a["distance"] == pytest.approx(info_b["distance"], abs=ONE_STEP_EE_M)
+            if min(abs(info_a["distance"] - 0.05), abs(info_b["distance"] - 0.05)) < ONE_STEP_EE_M:
+                continue  # the engines' gap may put the two on either side of the success threshold
             assert info_a["is_success"] == info_b["is_success"]
             assert (term_a, trunc_a) == (term_b, trunc_b)
-            assert reward_a == pytest.approx(reward_b, abs=0.005)
+            assert reward_a == pytest.approx(reward_b, abs=ONE_STEP_REWARD)
             assert info_a["reward_success"] == info_b["reward_success"]
     assert (violations > 0) == (pose == 2)
     _close(envs)
@@ -196,6 +211,270 @@ def test_parity_command_without_mujoco_is_a_clear_error(tmp_path, capsys):
     assert "backend 'mujoco'" in err and "pip install armreach-mujoco mujoco" in err
 
 
+# -- the engines' gaps, per arm, near what they measure ---------------------------------------
+class Measured(NamedTuple):
+    """One arm's PyBullet-MuJoCo gaps in one of ``armreach parity``'s sequences, the larger of seeds 0 and 1."""
+
+    free_ee_mm: float  # end-effector RMS gap before the first contact on either engine
+    free_joint_mrad: float  # joint RMS gap before it
+    contact_ee_mm: float | None  # end-effector RMS gap from the first contact on (None: no contact, either seed)
+    jerk_pct: float | None  # how much the jerk ratio exceeds 1, in % (None: the press, whose jerk is not compared)
+    contact_steps: tuple[int | None, int | None]  # the first contact on either engine with seed 0, seed 1
+
+
+#: Each gap may be this many times what it measured.
+BOUND_FACTOR = 2.5
+#: How many steps the first contact may move from where it was measured.
+CONTACT_STEP_SLACK = 2
+#: Forward kinematics against the URDF, the largest end-effector distance over 1,000 random
+#: configurations of every arm below, seeds 0 and 1: PyBullet 1.08e-7 m (KUKA), MuJoCo 7.9e-16 m (Panda).
+FK_BOUNDS_M = {"pybullet": 2.5e-7, "mujoco": 2e-15}
+#: The gaps of ``armreach parity``'s four sequences, 200 steps from home (the larger of seeds 0
+#: and 1), per arm and sequence: each test bound is BOUND_FACTOR times the figure here. Measured
+#: with ``armreach parity --seed S`` (ar6) and ``armreach parity --corpus --seed S`` for S in 0, 1,
+#: reading parity.json, i.e. ``run_parity(("pybullet", "mujoco"), urdf, steps=200, seed=S)``
+#: (``_measure_table`` below prints this table again). Notable rows: ar6's biased run with
+#: seed 1 folds the wrist onto the ground at step 60 and the engines then part by 80 mm; the
+#: Pandas' open-loop gaps are 1-4 mm where the other arms' are under 1 mm; Franka's IK reach
+#: with seed 1 aims beyond the arm's joint limits, the IK loop (which does not know them)
+#: swings joint 1 across +-1.5 rad with joints 2, 4 and 6 on their limits, and the engines part
+#: by 20.6 mm (docs/parity.md).
+MEASURED: dict[tuple[str, str], Measured] = {
+    ("ar6", "random"): Measured(0.264, 0.329, 6.89, 0.177, (137, None)),
+    ("ar6", "biased"): Measured(0.0327, 0.102, 79.8, 0.654, (27, 60)),
+    ("ar6", "scripted"): Measured(0.000906, 0.417, None, 0.00436, (None, None)),
+    ("ar6", "press"): Measured(0.00125, 0.104, 1.09, None, (38, 38)),
+    ("ur3", "random"): Measured(0.0475, 0.19, 4.65, 0.913, (16, 127)),
+    ("ur3", "biased"): Measured(0.00204, 0.00778, 9.37, 2.47, (3, 1)),
+    ("ur3", "scripted"): Measured(0.0106, 0.384, None, 0.134, (None, None)),
+    ("ur3", "press"): Measured(0.000995, 0.00537, 3.42, None, (2, 2)),
+    ("ur5", "random"): Measured(0.209, 0.116, 11.0, 0.463, (12, 13)),
+    ("ur5", "biased"): Measured(0.15, 0.497, 12.5, 0.524, (4, 10)),
+    ("ur5", "scripted"): Measured(0.00214, 0.13, None, 0.00681, (None, None)),
+    ("ur5", "press"): Measured(0.00262, 0.0132, 1.46, None, (8, 8)),
+    ("ur5-gripper", "random"): Measured(0.209, 0.116, 11.0, 0.463, (12, 13)),
+    ("ur5-gripper", "biased"): Measured(0.15, 0.497, 12.5, 0.668, (4, 10)),
+    ("ur5-gripper", "scripted"): Measured(0.00328, 0.168, None, 0.0186, (None, None)),
+    ("ur5-gripper", "press"): Measured(0.00262, 0.0132, 1.46, None, (8, 8)),
+    ("ur10", "random"): Measured(0.0952, 0.0312, 16.6, 0.555, (8, 2)),
+    ("ur10", "biased"): Measured(0.0489, 0.0165, 10.1, 0.356, (1, 1)),
+    ("ur10", "scripted"): Measured(0.00386, 0.11, None, 0.0507, (None, None)),
+    ("ur10", "press"): Measured(0.00508, 0.00985, 0.845, None, (5, 5)),
+    ("kinova-jaco", "random"): Measured(0.87, 1.2, 2.1, 0.0449, (None, 60)),
+    ("kinova-jaco", "biased"): Measured(1.55, 2.72, None, 0.0226, (None, None)),
+    ("kinova-jaco", "scripted"): Measured(0.147, 1.69, None, 0.809, (None, None)),
+    ("kinova-jaco", "press"): Measured(0.00447, 0.0456, 4.12, None, (10, 10)),
+    ("z1", "random"): Measured(0.131, 0.365, None, 0.000852, (None, None)),
+    ("z1", "biased"): Measured(0.0253, 0.0731, 26.4, 0.0919, (31, 34)),
+    ("z1", "scripted"): Measured(0.00406, 0.367, None, 0.0235, (None, None)),
+    ("z1", "press"): Measured(0.00664, 0.0236, 9.99, None, (33, 33)),
+    ("so100", "random"): Measured(0.0196, 0.16, None, 0.000552, (None, None)),
+    ("so100", "biased"): Measured(0.00365, 0.0391, None, 0.000895, (None, None)),
+    ("so100", "scripted"): Measured(0.000568, 0.167, None, 0.0107, (None, None)),
+    ("so100", "press"): Measured(0.000481, 0.00396, 1.25, None, (54, 54)),
+    ("so101", "random"): Measured(0.0763, 0.251, 0.935, 0.00735, (None, 189)),
+    ("so101", "biased"): Measured(0.0164, 0.0555, 13.3, 1.69, (17, 36)),
+    ("so101", "scripted"): Measured(0.00113, 0.253, None, 0.0109, (None, None)),
+    ("so101", "press"): Measured(0.00155, 0.0252, 1.05, None, (15, 15)),
+    ("xarm7", "random"): Measured(0.483, 5.03, 2.65, 0.13, (None, 150)),
+    ("xarm7", "biased"): Measured(0.231, 1.64, 12.3, 0.715, (54, 28)),
+    ("xarm7", "scripted"): Measured(0.0515, 1.09, None, 1.92, (None, None)),
+    ("xarm7", "press"): Measured(0.015, 0.0717, 1.21, None, (13, 13)),
+    ("panda", "random"): Measured(2.74, 2.02, 9.0, 0.369, (179, 165)),
+    ("panda", "biased"): Measured(3.71, 2.03, None, 0.0827, (None, None)),
+    ("panda", "scripted"): Measured(0.377, 0.404, None, 6.02, (None, None)),
+    ("panda", "press"): Measured(0.547, 0.464, 4.5, None, (81, 81)),
+    ("talos-left-arm", "random"): Measured(0.122, 0.0888, 11.2, 0.584, (8, 7)),
+    ("talos-left-arm", "biased"): Measured(0.0677, 0.0508, 5.64, 3.16, (6, 4)),
+    ("talos-left-arm", "scripted"): Measured(0.00148, 0.191, None, 0.14, (None, None)),
+    ("talos-left-arm", "press"): Measured(0.00544, 0.00593, 1.83, None, (4, 4)),
+    ("kuka-iiwa", "random"): Measured(0.0171, 0.0304, None, 0.000619, (None, None)),
+    ("kuka-iiwa", "biased"): Measured(0.138, 0.213, 2.84, 0.0574, (193, 194)),
+    ("kuka-iiwa", "scripted"): Measured(0.00423, 0.214, None, 0.0692, (None, None)),
+    ("kuka-iiwa", "press"): Measured(0.0347, 0.106, 3.37, None, (128, 128)),
+    ("franka-panda", "random"): Measured(3.23, 3.62, 4.74, 0.111, (None, 142)),
+    ("franka-panda", "biased"): Measured(2.95, 6.12, 7.89, 0.0581, (None, 179)),
+    ("franka-panda", "scripted"): Measured(20.6, 21.1, None, 1.7, (None, None)),
+    ("franka-panda", "press"): Measured(0.797, 0.654, None, None, (None, None)),
+    ("xarm6", "random"): Measured(0.419, 0.393, None, 0.132, (None, None)),
+    ("xarm6", "biased"): Measured(0.536, 1.17, 1.22, 0.0862, (None, 62)),
+    ("xarm6", "scripted"): Measured(0.0384, 0.455, None, 0.107, (None, None)),
+    ("xarm6", "press"): Measured(0.0217, 0.0632, 1.3, None, (21, 21)),
+}
+#: Arms the default run covers (the rest of the corpus runs with -m slow).
+FAST_ARMS = ("ar6", "xarm6")
+
+
+def _urdf(arm: str) -> str | None:
+    """The arm's URDF (None: the bundled ar6); skips when its package is not installed."""
+    if arm == "ar6":
+        return None
+    path = corpus_arm(arm).path
+    if path is None:
+        pytest.skip(f"{arm} is not installed: {corpus_arm(arm).install}")
+    return str(path)
+
+
+def _assert_measured(
+    arm: str,
+    seed: int,
+    sequence: str,
+    free_ee_m: float | None,
+    free_joint_rad: float | None,
+    contact_ee_m: float | None,
+    jerk_ratio: float,
+    contact_step: int | None,
+) -> None:
+    """One sequence's gaps are within BOUND_FACTOR of MEASURED, and the first contact is where it was."""
+    want, where = MEASURED[(arm, sequence)], f"{arm} {sequence} seed {seed}"
+    step = want.contact_steps[seed]
+    assert (contact_step is None) == (step is None), f"{where}: first contact at step {contact_step}, measured {step}"
+    if contact_step is not None and step is not None:
+        assert abs(contact_step - step) <= CONTACT_STEP_SLACK, f"{where}: first contact {contact_step}, measured {step}"
+    jerk = 100 * (jerk_ratio - 1) if sequence in JERK_SEQUENCES else None
+    for name, got, measured in (
+        ("free-space end-effector RMS gap (mm)", None if free_ee_m is None else 1e3 * free_ee_m, want.free_ee_mm),
+        (
+            "free-space joint RMS gap (mrad)",
+            None if free_joint_rad is None else 1e3 * free_joint_rad,
+            want.free_joint_mrad,
+        ),
+        ("contact end-effector RMS gap (mm)", None if contact_ee_m is None else 1e3 * contact_ee_m, want.contact_ee_mm),
+        ("jerk ratio over 1 (%)", jerk, want.jerk_pct),
+    ):
+        if got is not None:
+            assert measured is not None, f"{where}: {name} {got:.3g} where none was measured"
+            assert got <= BOUND_FACTOR * measured, (
+                f"{where}: {name} {got:.3g} > {BOUND_FACTOR} x {measured:.3g} measured"
+            )
+
+
+def _assert_report(arm: str, report: ParityReport) -> None:
+    for name, kinematic in report.kinematic.items():
+        assert kinematic.max_m <= FK_BOUNDS_M[name], f"{arm} {name}: FK error {kinematic.max_m:.2e} m"
+    for sequence in SEQUENCES:
+        gap = report.gap(sequence, "mujoco")
+        jerk = report.jerk_ratio(sequence, "mujoco")
+        _assert_measured(
+            arm,
+            report.seed,
+            sequence,
+            gap.free_ee_rms_m,
+            gap.free_joint_rms_rad,
+            gap.contact_ee_rms_m,
+            jerk,
+            gap.contact_step,
+        )
+
+
+@needs_both
+@pytest.mark.parametrize(("arm", "seed"), [("ar6", 0), ("ar6", 1), ("xarm6", 0)])  # xArm6, seed 1: the command test
+def test_the_engines_stay_near_their_measured_gaps(arm, seed):
+    report = run_parity(PAIR, _urdf(arm), steps=200, configs=200, seed=seed)
+    _assert_report(arm, report)
+    for runs in report.trajectories.values():  # on these arms both engines touch on the same step and link
+        first, second = runs.values()
+        assert (first.first_contact, first.first_contact_links) == (second.first_contact, second.first_contact_links)
+
+
+@pytest.mark.slow
+@needs_both
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("arm", [arm.name for arm in CORPUS if arm.name not in FAST_ARMS])
+def test_the_engines_stay_near_their_measured_gaps_on_the_corpus(arm, seed):
+    _assert_report(arm, run_parity(PAIR, _urdf(arm), steps=200, configs=200, seed=seed))
+
+
+def _measure_table() -> None:
+    """Print MEASURED again: ``python -c "from tests.test_parity import _measure_table; _measure_table()"``."""
+
+    def up(value: float) -> float:  # three significant digits, rounded up
+        scale = 10.0 ** (math.floor(math.log10(value)) - 2) if value > 0 else 1.0
+        return float(f"{math.ceil(value / scale) * scale:.3g}")
+
+    for arm in ("ar6", *(a.name for a in CORPUS if a.path is not None)):
+        reports = [
+            run_parity(PAIR, None if arm == "ar6" else str(corpus_arm(arm).path), steps=200, seed=s) for s in (0, 1)
+        ]
+        for sequence in SEQUENCES:
+            gaps = [r.gap(sequence, "mujoco") for r in reports]
+            contact = [g.contact_ee_rms_m for g in gaps if g.contact_ee_rms_m is not None]
+            jerk = max(100 * (r.jerk_ratio(sequence, "mujoco") - 1) for r in reports)
+            free_ee = up(1e3 * max(g.free_ee_rms_m or 0 for g in gaps))
+            free_joint = up(1e3 * max(g.free_joint_rms_rad or 0 for g in gaps))
+            contact_ee = up(1e3 * max(contact)) if contact else None
+            jerk_pct = up(jerk) if sequence in JERK_SEQUENCES else None
+            steps = tuple(g.contact_step for g in gaps)
+            print(f"    ({arm!r}, {sequence!r}): Measured({free_ee}, {free_joint}, {contact_ee}, {jerk_pct}, {steps}),")
+
+
+# -- a joint pressed against its limit -----------------------------------------------------
+class LimitPress(NamedTuple):
+    """A joint driven 0.1 rad past its limit: the engines' gaps (rad) and how far each goes past the limit."""
+
+    held_gap: float  # the pressed joint, PyBullet against MuJoCo, over the last 24 of 48 steps
+    peak_gap: float  # the pressed joint, over the whole run (the steps onto the limit)
+    other_gap: float  # every other joint, over the whole run
+    past_pybullet: float  # how far past its limit the pressed joint ends
+    past_mujoco: float
+
+
+#: (arm, joint index, +1 upper / -1 lower limit): what ``_press_limit`` measures on each engine (it
+#: has no random input: every seed gives these numbers). Measured with
+#: ``{n: _press_limit(n, arm, joint, side) for n in PAIR}`` and the gaps of the test below.
+#: MuJoCo's joint limits are soft (the contacts' two-step time constant): under a motor pushing
+#: with its full effort the joint rests a little past the limit, 19.5 mrad on the xArm6's wrist,
+#: where Bullet's rigid limit row holds it to 7 µrad.
+LIMIT_PRESSES = {
+    ("ar6", 0, +1): LimitPress(2.77e-4, 1.39e-3, 1.10e-4, 5.8e-7, 2.78e-4),  # the base onto +2π, no gravity load
+    ("xarm6", 2, +1): LimitPress(5.99e-4, 1.54e-3, 4.2e-6, 0.0, 5.99e-4),  # the elbow onto 0.19 rad, under load
+    ("xarm6", 4, -1): LimitPress(1.95e-2, 1.95e-2, 1.17e-5, 7.2e-6, 1.95e-2),  # the wrist onto -1.69 rad
+}
+#: Slack on how far past the limit a joint ends (rad), for figures measured at 0.
+PAST_SLACK = 1e-6
+
+
+def _press_limit(backend: str, arm: str, joint: int, side: int, steps: int = 48) -> tuple[np.ndarray, float]:
+    """Hold home, the joint 0.1 rad inside its limit; its target walks out by ``max_joint_step`` a step
+    to 0.1 rad past the limit and stays there. Returns the joint angles per step and the limit."""
+    env = ArmEnv("reach", backend=backend, urdf=_urdf(arm))
+    try:
+        env.reset(seed=0)
+        robot, world = env.robot, env.backend
+        limit = float((robot.upper if side > 0 else robot.lower)[joint])
+        target = robot.home.copy()
+        target[joint] = limit - 0.1 * side
+        world.reset_joints(target)
+        angles = np.empty((steps, robot.dof))
+        for i in range(steps):
+            target[joint] = limit + side * min(0.1, side * (target[joint] - limit) + env.max_joint_step)
+            world.set_joint_targets(target)  # the backend's own API: the env would clip the target
+            world.step()
+            angles[i] = world.read_state().q
+        return angles, limit
+    finally:
+        env.close()
+
+
+@needs_both
+@pytest.mark.parametrize(("arm", "joint", "side"), sorted(LIMIT_PRESSES))
+def test_a_joint_pressed_against_its_limit_rests_there_on_both_engines(arm, joint, side):
+    runs = {name: _press_limit(name, arm, joint, side) for name in PAIR}
+    want = LIMIT_PRESSES[(arm, joint, side)]
+    (bullet, limit), (mj, _) = runs["pybullet"], runs["mujoco"]
+    gap = np.abs(bullet - mj)
+    others = np.delete(gap, joint, axis=1)
+    for name, got, measured in (
+        ("held gap", gap[24:, joint].max(), want.held_gap),
+        ("peak gap", gap[:, joint].max(), want.peak_gap),
+        ("other joints' gap", others.max(), want.other_gap),
+    ):
+        assert got <= BOUND_FACTOR * measured, f"{name} {got:.3g} rad > {BOUND_FACTOR} x {measured:.3g} measured"
+    for name, angles, measured in (("pybullet", bullet, want.past_pybullet), ("mujoco", mj, want.past_mujoco)):
+        past = side * (angles[-1, joint] - limit)
+        assert -PAST_SLACK <= past <= BOUND_FACTOR * measured + PAST_SLACK, f"{name}: {past:.3g} rad past the limit"
+
+
 # -- armreach parity -----------------------------------------------------------------------
 def _rms_gap(runs, reference, other, key):
     a, b = np.asarray(runs[reference][key]), np.asarray(runs[other][key])
@@ -204,28 +483,34 @@ def _rms_gap(runs, reference, other, key):
     return float(np.sqrt(np.mean((a - b) ** 2)))
 
 
+#: Env steps per second of ``armreach parity`` on xArm6 (seed 1, 200 steps, on a 2-core x86-64
+#: machine shared with other work): measured PyBullet 2,200-2,600, MuJoCo 3,300-5,200 (the
+#: payload's steps_per_second, two runs of the command below); a third of the lower is the bound.
+STEPS_PER_SECOND = {"pybullet": 700.0, "mujoco": 1100.0}
+
+
 @needs_both
-@pytest.mark.parametrize("arm", ["ar6", "xarm6"])
-def test_parity_command_writes_report_json_and_plot(tmp_path, capsys, xarm_urdf, arm):
+def test_parity_command_writes_report_json_and_plot(tmp_path, capsys):
+    """The command on xArm6 (``--urdf``, ``--ee-link``) with seed 1: its report holds the numbers
+    of its trajectories, and they are the engines' measured gaps (MEASURED)."""
     out = tmp_path / "parity"
-    args = ["parity", "--steps", "60", "--configs", "100", "--seed", "2", "--out", str(out)]
-    if arm == "xarm6":
-        args += ["--urdf", str(xarm_urdf), "--ee-link", "link6"]
-    assert main(args) == 0
+    urdf = _urdf("xarm6")
+    args = ["parity", "--steps", "200", "--configs", "100", "--seed", "1", "--out", str(out)]
+    assert main([*args, "--urdf", str(urdf), "--ee-link", "link6"]) == 0
     assert "PASS" in capsys.readouterr().out
     payload = json.loads((out / "parity.json").read_text())
-    assert payload["backends"] == ["pybullet", "mujoco"] and payload["steps"] == 60
-    tol = payload["tolerances"]
+    assert payload["backends"] == ["pybullet", "mujoco"] and payload["steps"] == 200 and payload["seed"] == 1
+    assert (Path(payload["urdf"]), payload["ee_link"]) == (Path(urdf), "link6")
     for name in PAIR:
         kin = payload["kinematic"][name]
         assert kin["configs"] == 100
-        assert math.isfinite(kin["max_m"]) and kin["max_m"] < tol["fk_m"]
-        assert math.isfinite(payload["steps_per_second"][name]) and payload["steps_per_second"][name] > 50
+        assert kin["max_m"] <= FK_BOUNDS_M[name], f"{name}: FK error {kin['max_m']:.2e} m"
+        assert payload["steps_per_second"][name] >= STEPS_PER_SECOND[name]
     assert set(payload["dynamic"]["mujoco"]) == set(SEQUENCES)
     for sequence, gap in payload["dynamic"]["mujoco"].items():
         runs = payload["trajectories"][sequence]
-        assert np.asarray(runs["mujoco"]["q"]).shape == (60, 6)
-        assert np.asarray(runs["mujoco"]["action"]).shape == (60, 6)
+        assert np.asarray(runs["mujoco"]["q"]).shape == (200, 6)
+        assert np.asarray(runs["mujoco"]["action"]).shape == (200, 6)
         if sequence in OPEN_LOOP:  # the same seeded actions on both engines
             assert runs["mujoco"]["action"] == runs["pybullet"]["action"]
         assert np.all(np.isfinite(runs["mujoco"]["q"])) and np.all(np.isfinite(runs["pybullet"]["ee"]))
@@ -241,15 +526,17 @@ def test_parity_command_writes_report_json_and_plot(tmp_path, capsys, xarm_urdf,
             assert payload["first_contact"][sequence][name]["step"] == (
                 int(np.argmax(contact[name])) if contact[name].any() else None
             )
-        bound = tol["random_ee_rms_m"] if sequence in OPEN_LOOP else tol["scripted_ee_rms_m"]
-        if gap["free_ee_rms_m"] is not None:
-            assert gap["free_ee_rms_m"] < bound and gap["free_joint_rms_rad"] < tol["joint_rms_rad"]
         jerks = payload["jerk"][sequence]
-        if sequence in JERK_SEQUENCES:
-            assert max(jerks.values()) <= tol["jerk_ratio"] * min(jerks.values())
-    # the press reaches the ground on both engines, and where it does they agree
-    assert all(payload["first_contact"]["press"][name]["step"] is not None for name in PAIR)
-    assert payload["dynamic"]["mujoco"]["press"]["contact_ee_rms_m"] < tol["contact_scripted_ee_rms_m"]
+        _assert_measured(
+            "xarm6",
+            1,
+            sequence,
+            gap["free_ee_rms_m"],
+            gap["free_joint_rms_rad"],
+            gap["contact_ee_rms_m"],
+            max(jerks.values()) / min(jerks.values()),
+            gap["contact_step"],
+        )
     assert payload["pass"] is True and payload["failures"] == []
     report = (out / "report.md").read_text()
     assert "**PASS**" in report and "| mujoco | random |" in report
@@ -279,24 +566,29 @@ def test_a_backend_without_contact_queries_runs_as_free_space(monkeypatch):
     assert not run.contact_known and not run.contact.any() and run.first_contact is None
 
 
+@pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("sequence", ["scripted", "press"])
-def test_the_ik_sequences_track_an_aim_moving_at_a_walking_pace(sequence):
+def test_the_ik_sequences_track_an_aim_moving_at_a_walking_pace(sequence, seed):
     """The IK reach and press follow an aim that moves at AIM_SPEED from the end effector's home:
-    the end effector never moves much faster (aimed at the final point from the first step, the
+    the end effector never moves faster (aimed at the final point from the first step, the
     loop jumped by clipped steps of several centimetres and amplified the engines' differences),
-    and it gets where the aim goes: the target, or the ground under its home."""
+    and it gets where the aim goes: the target, or the ground under its home.
+
+    Measured with this test's drive and numbers, seeds 0 and 1: the fastest step 0.9998 x
+    AIM_SPEED; the reach ends 1.2e-6 m from the target; the press first touches at step 38 and
+    ends with the tool 14.99 mm above the ground (its wrist on it), 408 mm below its home."""
     from armreach_core.diagnostics.parity import AIM_SPEED, drive
-    from armreach_core.env import ArmEnv
 
     env = ArmEnv("reach", backend="pybullet")
     try:
-        run = drive(env, sequence, steps=200, seed=0)
+        run = drive(env, sequence, steps=200, seed=seed)
         dt, target = env.physics.control_dt, env.task.target.copy()
     finally:
         env.close()
     speed = np.linalg.norm(np.diff(run.ee, axis=0), axis=1) / dt
-    assert speed.max() <= 2.0 * AIM_SPEED, f"{speed.max():.2f} m/s"
+    assert speed.max() <= 1.5 * AIM_SPEED, f"{speed.max():.3f} m/s"
     if sequence == "scripted":
-        assert np.linalg.norm(run.ee[-1] - target) < 0.01
+        assert np.linalg.norm(run.ee[-1] - target) < 3e-6
     else:
-        assert run.first_contact is not None and run.ee[-1][2] < run.ee[0][2] - 0.1
+        assert run.first_contact == 38
+        assert run.ee[-1][2] == pytest.approx(0.01499, abs=0.0005)  # resting on the ground
