@@ -3,12 +3,15 @@
 The arms come from :data:`armreach_core.diagnostics.corpus.CORPUS` (descriptions nobody here wrote);
 one that is not installed is skipped with the command that installs it. What each arm
 must give follows from its URDF alone; the expected end effectors below are what those
-rules give, written down so that a change in them is seen.
+rules give, written down so that a change in them is seen. ``armreach robot --corpus`` and
+``armreach parity --corpus`` run over it from the command line (a few arms by default, all
+of them in the slow tests).
 """
 
 from __future__ import annotations
 
 import functools
+import json
 import math
 from typing import Any
 
@@ -43,6 +46,23 @@ EXPECTED = {
     "kuka-iiwa": ("lbr_iiwa_link_7", ()),
     "franka-panda": ("panda_grasptarget", ("panda_finger_joint1", "panda_finger_joint2")),
     "xarm6": ("link6", ()),
+}
+#: Actuated joints: the arm's own, as its maker builds it; TALOS's description starts after its shoulder joint.
+DOF = {
+    "ur3": 6,
+    "ur5": 6,
+    "ur5-gripper": 6,
+    "ur10": 6,
+    "kinova-jaco": 6,
+    "z1": 6,
+    "so100": 5,
+    "so101": 5,
+    "xarm7": 7,
+    "panda": 7,
+    "talos-left-arm": 6,
+    "kuka-iiwa": 7,
+    "franka-panda": 7,
+    "xarm6": 6,
 }
 #: Arms whose held joints are read from the engines: a jaw, mimic fingers, a gripper below a fixed stator.
 HELD = ("so100", "franka-panda", "z1")
@@ -79,7 +99,7 @@ def _says_gripper(joint: Any) -> bool:
 def test_loads_with_no_arguments(arm: CorpusArm) -> None:
     path = _path(arm)
     robot = RobotModel(path)  # every arm, TALOS's hanging one included (its base is raised)
-    assert robot.dof >= 1
+    assert robot.dof == DOF[arm.name], robot.joint_names
 
 
 @pytest.mark.parametrize("arm", _arms())
@@ -106,7 +126,6 @@ def test_held_joints_cover_every_movable_joint_not_actuated(arm: CorpusArm) -> N
     movable = {str(j.name) for j in robot.parsed.model.robot.joints if str(j.type) in MOVABLE_TYPES}
     held = {j.name for j in robot.held_joints}
     assert held == movable - set(robot.joint_names)
-    assert not held & set(robot.joint_names)
     position = {j.name: j.position for j in robot.held_joints}
     for joint in robot.held_joints:
         assert math.isfinite(joint.position) and joint.effort > 0
@@ -286,3 +305,94 @@ def test_engines_agree_in_contact(arm: CorpusArm) -> None:
         assert gap.contact_ee_rms_m is not None and gap.contact_ee_rms_m <= bound, (
             f"{arm.name} {sequence}: {gap.contact_ee_rms_m * 1e3:.1f} mm"
         )
+
+
+# `armreach robot --corpus` and `armreach parity --corpus`, on a few arms (--arms) and on all of them.
+
+#: An arm listed in the corpus whose description is not on this machine (its package is there, its file is not).
+GHOST = CorpusArm("ghost-arm", "pybullet_data", "no_such_arm/model.urdf")
+
+
+@pytest.fixture
+def corpus_with_a_missing_arm(monkeypatch: pytest.MonkeyPatch) -> str:
+    """The corpus plus :data:`GHOST`; the name of an installed arm to run the commands on."""
+    from armreach_core.diagnostics import corpus
+
+    monkeypatch.setattr(corpus, "CORPUS", (*corpus.CORPUS, GHOST))
+    arm = corpus.corpus_arm("kuka-iiwa")
+    if arm.path is None:
+        pytest.skip(f"kuka-iiwa is not installed: {arm.install}")
+    return arm.name
+
+
+@pytest.mark.skipif(not BACKENDS, reason="no physics backend installed")
+def test_robot_corpus_on_chosen_arms_reports_the_missing_one(corpus_with_a_missing_arm, tmp_path, capsys) -> None:
+    from armreach_core.cli import main
+
+    out = tmp_path / "robot"
+    arms = f"{corpus_with_a_missing_arm},{GHOST.name}"
+    fast = ["--backends", BACKENDS[0], "--steps", "20", "--ik-episodes", "2", "--parity-steps", "0"]
+    assert main(["robot", "--corpus", "--arms", arms, *fast, "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert f"{GHOST.name}: not installed (pip install pybullet)" in printed
+    assert f"{corpus_with_a_missing_arm}: usable" in printed
+    assert sorted(path.name for path in out.iterdir()) == ["corpus.json", "corpus.md"]
+    reports = json.loads((out / "corpus.json").read_text())
+    assert list(reports) == [corpus_with_a_missing_arm]
+    (engine,) = reports[corpus_with_a_missing_arm]["engines"]
+    assert engine["backend"] == BACKENDS[0]
+    assert engine["deterministic"] is True
+    rows = [line for line in (out / "corpus.md").read_text().splitlines() if line.startswith("| kuka")]
+    assert len(rows) == 1 and BACKENDS[0] in rows[0]
+
+
+@pytest.mark.skipif(not {"pybullet", "mujoco"} <= set(BACKENDS), reason="needs the PyBullet and MuJoCo backends")
+def test_parity_corpus_on_chosen_arms_reports_the_missing_one(corpus_with_a_missing_arm, tmp_path, capsys) -> None:
+    from armreach_core.cli import main
+
+    out = tmp_path / "parity"
+    arms = f"{GHOST.name},{corpus_with_a_missing_arm}"
+    fast = ["--backends", "pybullet", "mujoco", "--steps", "20", "--configs", "20"]
+    assert main(["parity", "--corpus", "--arms", arms, *fast, "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert f"{GHOST.name}: not installed (pip install pybullet)" in printed
+    assert f"{corpus_with_a_missing_arm}: pass" in printed
+    assert sorted(path.name for path in out.iterdir()) == ["corpus.json", "corpus.md", corpus_with_a_missing_arm]
+    assert {path.name for path in (out / corpus_with_a_missing_arm).iterdir()} >= {"report.md", "parity.json"}
+    rows = json.loads((out / "corpus.json").read_text())
+    assert list(rows) == [corpus_with_a_missing_arm]
+    assert rows[corpus_with_a_missing_arm]["failures"] == []
+    assert f"| {corpus_with_a_missing_arm} | mujoco |" in (out / "corpus.md").read_text()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not BACKENDS, reason="no physics backend installed")
+def test_robot_corpus_runs_every_installed_arm(corpus_with_a_missing_arm, tmp_path, capsys) -> None:
+    from armreach_core.cli import main
+
+    out = tmp_path / "robot"
+    fast = ["--backends", BACKENDS[0], "--steps", "20", "--ik-episodes", "2", "--parity-steps", "0"]
+    status = main(["robot", "--corpus", *fast, "--out", str(out)])
+    printed = capsys.readouterr().out
+    assert f"{GHOST.name}: not installed (pip install pybullet)" in printed
+    installed = [arm.name for arm in CORPUS if arm.path is not None]
+    reports = json.loads((out / "corpus.json").read_text())
+    assert list(reports) == installed
+    assert status == (0 if all(report["usable"] for report in reports.values()) else 1)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not {"pybullet", "mujoco"} <= set(BACKENDS), reason="needs the PyBullet and MuJoCo backends")
+def test_parity_corpus_runs_every_installed_arm(corpus_with_a_missing_arm, tmp_path, capsys) -> None:
+    from armreach_core.cli import main
+
+    out = tmp_path / "parity"
+    status = main(["parity", "--corpus", "--backends", "pybullet", "mujoco", "--steps", "50", "--configs", "50",
+                   "--out", str(out)])  # fmt: skip
+    printed = capsys.readouterr().out
+    assert f"{GHOST.name}: not installed (pip install pybullet)" in printed
+    installed = [arm.name for arm in CORPUS if arm.path is not None]
+    rows = json.loads((out / "corpus.json").read_text())
+    assert list(rows) == installed
+    assert all((out / name / "parity.json").is_file() for name in installed)
+    assert status == (0 if all(not row["failures"] for row in rows.values()) else 1)
