@@ -38,17 +38,19 @@ test-no-mujoco: $(STAMP)
 	ARMREACH_TEST_HIDE=mujoco $(BIN)/python -m pytest -m "not slow and not training" -q
 
 # The env, its checks and the plugins on the oldest Python armreach supports (3.10), where one
-# is installed: core, PyBullet and grasp, no training stack (the CPU torch wheel is 3.11's).
+# is installed: core, backends and grasp, no training stack (the CPU torch wheel is 3.11's).
+# PyPI's MuJoCo for 3.10 is an older release, so MuJoCo is hidden as in test-no-mujoco.
 PY310 ?= $(shell command -v python3.10 2>/dev/null || ls $$(pyenv root 2>/dev/null)/versions/3.10*/bin/python3.10 2>/dev/null | tail -1)
 VENV310 ?= .venv310
 test-py310:
 	@if [ -z "$(PY310)" ]; then echo "no python3.10 here: skipping the 3.10 run"; exit 0; fi; \
 	if [ ! -f $(VENV310)/.installed ] || [ pyproject.toml -nt $(VENV310)/.installed ]; then \
 		$(PY310) -m venv $(VENV310) && $(VENV310)/bin/python -m pip install --quiet --upgrade pip && \
-		$(VENV310)/bin/python -m pip install --quiet -e ".[dev]" -e backends/pybullet -e tasks/grasp && \
+		$(VENV310)/bin/python -m pip install --quiet setuptools -e ".[dev]" -e backends/pybullet -e backends/mujoco \
+			-e tasks/grasp && \
 		touch $(VENV310)/.installed; \
 	fi; \
-	$(VENV310)/bin/python -m pytest -m "not slow and not training" -q -p no:cacheprovider
+	ARMREACH_TEST_HIDE=mujoco $(VENV310)/bin/python -m pytest -m "not slow and not training" -q -p no:cacheprovider
 
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q
