@@ -45,6 +45,7 @@ def test_a_registered_robot_fills_what_the_spec_leaves_unset() -> None:
     assert defaults["target_radius"] == 0.5
     mine, _ = resolve_arm(ArmSpec.create(robot="ar6", ee_link="wrist_3_link"), "reach")
     assert mine.ee_link == "wrist_3_link"
+    assert ArmSpec.from_mapping(resolved.to_dict()) == resolved  # a resolved arm's record reads back
 
 
 def test_one_model_per_spec_and_a_model_never_changes() -> None:

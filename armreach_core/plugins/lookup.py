@@ -114,7 +114,7 @@ def resolve_arm(arm: ArmSpec, task: str | None = None) -> tuple[ArmSpec, dict[st
         return arm, {}
     name = arm.robot or (task_spec(task).robot if task is not None else None) or DEFAULT_ROBOT
     spec = robot_spec(name)
-    resolved = replace(arm, robot=name).with_defaults(spec.urdf, spec.ee_link, spec.home, spec.tool_joints)
+    resolved = replace(arm, robot=name).with_defaults(spec.arm())
     return resolved, dict(spec.task_defaults.get(task, {})) if task is not None else {}
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from armreach_core.errors import PluginError
+from armreach_core.robot.spec import ArmSpec
 
 if TYPE_CHECKING:
     from armreach_core.backend import Backend
@@ -167,6 +168,10 @@ class RobotSpec:
     task_defaults: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     description: str = ""
     tool_joints: tuple[str, ...] = ()
+
+    def arm(self) -> ArmSpec:
+        """The robot's description as an :class:`~armreach_core.robot.spec.ArmSpec`."""
+        return ArmSpec.create(self.urdf, self.ee_link, self.home, self.tool_joints, base_orientation=None)
 
 
 Spec = BackendSpec | TaskSpec | RobotSpec

@@ -138,10 +138,14 @@ class ArmSpec:
         unknown = sorted(str(key) for key in set(data) - set(ARM_KEYS))
         if unknown:
             raise ConfigError(f"{where}: unknown key(s) {unknown}; an arm may have {list(ARM_KEYS)}")
+        values = dict(data)
+        # A resolved arm records both its registered robot's name and that robot's file.
+        robot = values.pop("robot", None) if values.get("urdf") is not None else None
         try:
-            return cls.create(**dict(data))
+            spec = cls.create(**values)
         except ConfigError as exc:
             raise ConfigError(f"{where}: {exc}") from None
+        return spec if robot is None else replace(spec, robot=str(robot))
 
     def to_dict(self) -> dict[str, Any]:
         """The spec as plain data (lists for tuples; unset fields left out), for YAML and JSON."""
@@ -156,18 +160,12 @@ class ArmSpec:
         """The env's keyword arguments for this arm (unset fields left out)."""
         return {key: tuple(value) if isinstance(value, list) else value for key, value in self.to_dict().items()}
 
-    def with_defaults(
-        self,
-        urdf: str | os.PathLike[str],
-        ee_link: str | None,
-        home: tuple[float, ...] | None,
-        tool_joints: tuple[str, ...],
-    ) -> ArmSpec:
-        """This spec with a registered robot's description filling what it leaves unset."""
+    def with_defaults(self, defaults: ArmSpec) -> ArmSpec:
+        """This spec with ``defaults`` (a registered robot's description) filling what it leaves unset."""
         return replace(
             self,
-            urdf=str(Path(urdf).resolve()),
-            ee_link=self.ee_link if self.ee_link is not None else ee_link,
-            home=self.home if self.home is not None else home,
-            tool_joints=self.tool_joints if self.tool_joints is not None else tool_joints,
+            urdf=self.urdf if self.urdf is not None else defaults.urdf,
+            ee_link=self.ee_link if self.ee_link is not None else defaults.ee_link,
+            home=self.home if self.home is not None else defaults.home,
+            tool_joints=self.tool_joints if self.tool_joints is not None else defaults.tool_joints,
         )
