@@ -44,6 +44,7 @@ from armreach_core.rl.sweep_trials import (
     TRIAL_RECORD,
     RayUnavailableError,
     progress_callback,
+    ray_session,
     require_ray,
     run_trial,
     start_ray,
@@ -67,6 +68,7 @@ __all__ = [
     "parse_arm",
     "parse_spec",
     "progress_callback",
+    "ray_session",
     "require_ray",
     "run_sweep",
     "run_trial",
@@ -101,7 +103,7 @@ def run_sweep(
     out = out.resolve()
     out.mkdir(parents=True, exist_ok=True)
     (out / "spec.json").write_text(json.dumps(spec.record(), indent=2), encoding="utf-8")
-    ray = start_ray(address, cpus)
+    require_ray()
     from ray import tune
 
     def trainable(params: dict[str, Any]) -> None:
@@ -111,28 +113,25 @@ def run_sweep(
     resources = tune.with_resources(trainable, {"cpu": spec.cpus})
     storage_path = str(Path(storage).resolve()) if storage else str(out / "ray")
     experiment = os.path.join(storage_path, spec.name)
-    if resume and tune.Tuner.can_restore(experiment):
-        # Ray's own record: finished trials stay finished, the others run again (and continue
-        # from their run folders' checkpoints).
-        tuner = tune.Tuner.restore(experiment, resources, resume_unfinished=True, resume_errored=True)
-    else:
-        tuner = tune.Tuner(
-            resources,
-            param_space={"trial": tune.grid_search(list(trials))},
-            tune_config=tune.TuneConfig(reuse_actors=False),
-            run_config=tune.RunConfig(
-                name=spec.name,
-                storage_path=storage_path,
-                failure_config=tune.FailureConfig(max_failures=MAX_FAILURES),
-                verbose=1 if stream is not None else 0,
-            ),
-        )
     t0 = time.perf_counter()
-    try:
+    with ray_session(address, cpus):
+        if resume and tune.Tuner.can_restore(experiment):
+            # Ray's own record: finished trials stay finished, the others run again (and continue
+            # from their run folders' checkpoints).
+            tuner = tune.Tuner.restore(experiment, resources, resume_unfinished=True, resume_errored=True)
+        else:
+            tuner = tune.Tuner(
+                resources,
+                param_space={"trial": tune.grid_search(list(trials))},
+                tune_config=tune.TuneConfig(reuse_actors=False),
+                run_config=tune.RunConfig(
+                    name=spec.name,
+                    storage_path=storage_path,
+                    failure_config=tune.FailureConfig(max_failures=MAX_FAILURES),
+                    verbose=1 if stream is not None else 0,
+                ),
+            )
         grid = tuner.fit()
-    finally:
-        if address is None and not os.environ.get("RAY_ADDRESS"):
-            ray.shutdown()
     errors = [grid[i].error for i in range(len(grid)) if grid[i].error is not None]
     rows = collect(out, spec)
     write_report(out, rows, wall_seconds=time.perf_counter() - t0)

@@ -8,11 +8,12 @@ from that folder (:func:`trial_row`), so a row is the same whether the trial ran
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import platform
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,7 @@ __all__ = [
     "RayUnavailableError",
     "progress_callback",
     "ray_node",
+    "ray_session",
     "require_ray",
     "run_trial",
     "start_ray",
@@ -55,7 +57,13 @@ def require_ray() -> Any:
 
 
 def start_ray(address: str | None, cpus: int | None = None) -> Any:
-    """Connect to the cluster at ``address`` (or ``RAY_ADDRESS``), else start a local Ray with ``cpus`` CPUs."""
+    """Connect to the cluster at ``address`` (or ``RAY_ADDRESS``), else start a local Ray with ``cpus`` CPUs.
+
+    A local Ray is always a new one (``address="local"``): left to itself, ``ray.init()``
+    would join whatever cluster ``ray start`` (or Ray's test cluster) last recorded on
+    this machine, and then refuse ``num_cpus``. Nothing happens when Ray is already
+    initialized in this process.
+    """
     ray = require_ray()
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
     os.environ.setdefault("RAY_DEDUP_LOGS", "0")
@@ -65,8 +73,24 @@ def start_ray(address: str | None, cpus: int | None = None) -> Any:
     if address:
         ray.init(address=address, log_to_driver=False)
     else:
-        ray.init(num_cpus=cpus or os.cpu_count() or 1, include_dashboard=False, log_to_driver=False)
+        ray.init(address="local", num_cpus=cpus or os.cpu_count() or 1, include_dashboard=False, log_to_driver=False)
     return ray
+
+
+@contextlib.contextmanager
+def ray_session(address: str | None, cpus: int | None = None) -> Iterator[Any]:
+    """:func:`start_ray` for the duration of a ``with`` block; shut down on leaving it if this call started it.
+
+    A Ray the caller initialized before stays up (theirs to shut down).
+    """
+    ray = require_ray()
+    started = not ray.is_initialized()
+    start_ray(address, cpus)
+    try:
+        yield ray
+    finally:
+        if started and ray.is_initialized():
+            ray.shutdown()
 
 
 def ray_node() -> str | None:
@@ -143,8 +167,13 @@ def trial_row(trial: Trial, run_dir: Path, summary: Mapping[str, Any]) -> dict[s
     }
 
 
-def progress_callback(report: Callable[[dict[str, Any]], None], every: int) -> Any:
-    """An SB3 callback that calls ``report`` with the training success rate every ``every`` env steps."""
+def progress_callback(report: Callable[[dict[str, Any]], None], every: int, until: int | None = None) -> Any:
+    """An SB3 callback that calls ``report`` with the training success rate every ``every`` env steps.
+
+    Only below ``until`` steps: the result at the end of a trial is its evaluation's, reported
+    once that is done (a scheduler stops a trial whose report reaches its budget, and would
+    stop it before its evaluation). A resumed run reports from the step it continues at.
+    """
     from armreach_core.rl.callbacks import SuccessRateCallback
 
     class _Report(SuccessRateCallback):
@@ -152,11 +181,15 @@ def progress_callback(report: Callable[[dict[str, Any]], None], every: int) -> A
             super().__init__()
             self._next = every
 
+        def _on_training_start(self) -> None:
+            self._next = (int(self.model.num_timesteps) // every + 1) * every
+
         def _on_step(self) -> bool:
             keep_going = super()._on_step()
             if self.num_timesteps >= self._next:
-                self._next += every
-                report({"timesteps": int(self.num_timesteps), "success": self.rate or 0.0})
+                self._next = (self.num_timesteps // every + 1) * every
+                if until is None or self.num_timesteps < until:
+                    report({"timesteps": int(self.num_timesteps), "success": self.rate or 0.0})
             return bool(keep_going)
 
     return _Report()

@@ -26,7 +26,7 @@ import yaml
 from armreach_core.errors import ArmReachError, ConfigError
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.rl.sweep_spec import BUNDLED_ARM, SweepArm, Trial
-from armreach_core.rl.sweep_trials import progress_callback, require_ray, run_trial, start_ray
+from armreach_core.rl.sweep_trials import progress_callback, ray_session, require_ray, run_trial
 
 #: A key of the search space that is not a preset key: the width of both hidden layers.
 NET_WIDTH = "net_width"
@@ -156,15 +156,18 @@ def run_tune(
     out = out.resolve()
     out.mkdir(parents=True, exist_ok=True)
     experiment = out / "ray" / spec.name
-    if resume and not experiment.is_dir():
-        raise ConfigError(f"{out} holds no search to resume (no {experiment}); start one without --resume")
+    if resume and not tune.Tuner.can_restore(str(experiment)):
+        raise ConfigError(
+            f"{out} holds no search to resume (no Ray record in {experiment}); start one without --resume"
+        )
     if not resume and experiment.is_dir():
         raise ConfigError(f"{out} already holds a search; continue it with --resume, or choose another --out")
-    ray = start_ray(address, cpus)
 
     def trainable(params: dict[str, Any]) -> None:
         trial_id = tune.get_context().get_trial_id()
-        callback = progress_callback(lambda m: tune.report({**m, "score": m["success"]}), spec.report_every)
+        callback = progress_callback(
+            lambda m: tune.report({**m, "score": m["success"]}), spec.report_every, until=spec.steps
+        )
         row = run_trial(spec.trial(params, trial_id), out / "trials", callbacks=[callback])
         final = score(row["success_rate"], row["steps_to_95"], spec.steps)
         tune.report({"timesteps": spec.steps, "score": final, "success": row["success_rate"]})
@@ -182,7 +185,7 @@ def run_tune(
         grace_period=max(spec.report_every, spec.steps // 4),
         reduction_factor=2,
     )
-    try:
+    with ray_session(address, cpus):
         if resume:
             tuner = tune.Tuner.restore(str(experiment), trainable, resume_unfinished=True, resume_errored=True)
         else:
@@ -194,9 +197,6 @@ def run_tune(
                 run_config=tune.RunConfig(name=spec.name, storage_path=str(out / "ray"), verbose=0),
             )
         grid = tuner.fit()
-    finally:
-        if address is None and not os.environ.get("RAY_ADDRESS"):
-            ray.shutdown()
     frame = grid.get_dataframe()
     frame.to_csv(out / "trials.csv", index=False)
     best = grid.get_best_result(metric="score", mode="max", scope="last")
