@@ -12,7 +12,11 @@ from armreach_core.cli import main
 from tests.conftest import BACKENDS
 
 pytestmark = pytest.mark.skipif(not BACKENDS, reason="no physics backend installed")
-FAST = ["--steps", "50", "--ik-episodes", "3", "--parity-steps", "0", "--backends", BACKENDS[0]]
+FAST = ["--steps", "200", "--ik-episodes", "3", "--parity-steps", "0", "--backends", BACKENDS[0]]
+#: Env steps per second the page reports for ar6 (200 random steps): measured PyBullet 6,100,
+#: MuJoCo 8,700-9,700 (``armreach robot --steps 200 --ik-episodes 3 --parity-steps 0
+#: --backends NAME``, twice each, on a 2-core machine shared with other work); a third is the bound.
+STEPS_PER_S = {"pybullet": 2000.0, "mujoco": 2900.0}
 
 
 def test_the_bundled_arm_is_usable(tmp_path, capsys):
@@ -24,9 +28,10 @@ def test_the_bundled_arm_is_usable(tmp_path, capsys):
     assert report["ee_link"] == "tool0"
     (engine,) = report["engines"]
     assert engine["deterministic"] is True
-    assert engine["steps_per_s"] > 0
-    assert engine["ik_success"] == 1.0
-    assert report["home_lowest_m"] > 0
+    assert engine["steps_per_s"] >= STEPS_PER_S[BACKENDS[0]], engine["steps_per_s"]
+    # the IK episodes reach every target, in 22 steps on average (measured on both engines)
+    assert engine["ik_success"] == 1.0 and engine["ik_steps"] <= 44
+    assert report["home_lowest_m"] == pytest.approx(0.02916, abs=1e-4)  # measured: the wrist 29.16 mm up
     image = np.asarray(Image.open(tmp_path / "robot.png"))
     assert image.ndim == 3
     assert image.std() > 5  # not blank

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import resource
+from pathlib import Path
 
 import pytest
 
@@ -18,6 +20,13 @@ pytestmark = [
 ]
 
 
+#: RSS growth after warm-up of the soak below, steps and cycles: measured +0.00 and -0.02 MB on both
+#: engines with seeds 0 and 1 (``armreach soak --steps 400 --cycles 12 --episode-steps 50 --json
+#: --seed S``), where RSS moves in allocator steps (-1.36 MB seen); a MuJoCo env left open holds
+#: 0.4 MB, a PyBullet one 29 MB.
+RSS_GROWTH_MB = 2.0
+
+
 def test_soak_command_reports_every_backend_as_json(capsys):
     status = main(["soak", "--steps", "400", "--cycles", "12", "--episode-steps", "50", "--json"])
     payload = json.loads(capsys.readouterr().out)
@@ -26,8 +35,10 @@ def test_soak_command_reports_every_backend_as_json(capsys):
     assert [b["backend"] for b in payload["backends"]] == sorted(BACKENDS)
     for entry in payload["backends"]:
         steps, cycles = entry["steps"], entry["cycles"]
-        assert steps["steps"] == 400 and steps["resets"] >= 7  # 50-step episodes
-        assert steps["rss_samples_mb"] and steps["rss_end_mb"] > 0
+        # 50-step episodes, every one cut by the limit (measured: 8 resets, none unstable)
+        assert (steps["steps"], steps["resets"], steps["unstable"]) == (400, 8, 0)
+        assert len(steps["rss_samples_mb"]) == 50  # a sample every 400 // 50 steps
+        assert steps["rss_growth_mb"] <= RSS_GROWTH_MB and cycles["rss_growth_mb"] <= RSS_GROWTH_MB
         assert cycles["cycles"] == 12
         assert cycles["fds_growth"] == 0
     by_name = {b["backend"]: b for b in payload["backends"]}
@@ -41,7 +52,11 @@ def test_the_measures_see_a_leak():
     assert fds is not None and fds > 0
     with open(__file__, encoding="utf-8"):
         assert open_fds() == fds + 1
-    assert rss_mb() > 10.0
+    # RSS as the kernel counts it in pages (Linux): the same figure, allocations between the reads aside
+    statm = Path("/proc/self/statm")
+    if statm.is_file():
+        resident = int(statm.read_text(encoding="ascii").split()[1]) * resource.getpagesize() / 2**20
+        assert rss_mb() == pytest.approx(resident, abs=0.5)
     if "pybullet" in BACKENDS:
         live_clients = load_backend_probes("pybullet").live_clients
         assert live_clients is not None
