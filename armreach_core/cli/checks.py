@@ -8,16 +8,10 @@ half-made output folder behind.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeVar
 
 from armreach_core.errors import ConfigError
-
-if TYPE_CHECKING:
-    from armreach_core.diagnostics.corpus import CorpusArm
-
-T = TypeVar("T")
 
 
 def check_out(out: Path | None) -> None:
@@ -79,25 +73,3 @@ def check_corpus_flags(args: argparse.Namespace, urdf: str | None) -> None:
         raise ConfigError(f"--corpus checks the corpus arms, not {urdf}; drop one of them")
     if args.arms is not None and not args.corpus:
         raise ConfigError("--arms picks corpus arms; add --corpus")
-
-
-def on_arms(
-    names: Sequence[str], run: Callable[[CorpusArm, Path], T], *, log: Callable[[str], None] = print
-) -> dict[str, T]:
-    """``run(arm, urdf)`` on the corpus arms ``names``, in that order: the results by arm name.
-
-    An arm whose package is not installed is left out, with a line to ``log`` that says how
-    to install it (as :func:`~armreach_core.diagnostics.corpus.for_each_corpus_arm` does for
-    the whole corpus).
-    """
-    from armreach_core.diagnostics.corpus import corpus_arm
-
-    results: dict[str, T] = {}
-    for name in names:
-        arm = corpus_arm(name)
-        path = arm.path
-        if path is None:
-            log(f"{arm.name}: not installed ({arm.install})")
-            continue
-        results[arm.name] = run(arm, path)
-    return results

@@ -13,7 +13,6 @@ from armreach_core.cli.checks import (
     check_corpus_flags,
     check_counts,
     check_out,
-    on_arms,
 )
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 
@@ -65,23 +64,11 @@ def run(args: argparse.Namespace) -> int:
 
 def _corpus(args: argparse.Namespace) -> int:
     """Parity over the installed corpus arms (all, or --arms): one folder per arm and one table (markdown and JSON)."""
-    from armreach_core.diagnostics.corpus import CorpusArm
-    from armreach_core.diagnostics.parity import run_parity, run_parity_corpus
-    from armreach_core.diagnostics.parity_report import corpus_row, save_corpus, save_report
+    from armreach_core.diagnostics.parity import run_parity_corpus
+    from armreach_core.diagnostics.parity_report import save_corpus
 
     out: Path = args.out or Path("runs") / time.strftime("parity-corpus-%Y%m%d-%H%M%S")
-    if args.arms is None:
-        rows = run_parity_corpus(out, args.backends, steps=args.steps, configs=args.configs, seed=args.seed)
-    else:
-
-        def one(arm: CorpusArm, urdf: Path) -> dict[str, Any]:
-            report = run_parity(args.backends, str(urdf), steps=args.steps, configs=args.configs, seed=args.seed)
-            save_report(report, out / arm.name)
-            failures = report.failures()
-            print(f"{arm.name}: {'pass' if not failures else 'fail: ' + '; '.join(failures)}")
-            return corpus_row(report)
-
-        rows = on_arms(args.arms, one)
+    rows = run_parity_corpus(out, args.backends, steps=args.steps, configs=args.configs, seed=args.seed, arms=args.arms)
     table, saved = save_corpus(rows, out, steps=args.steps, seed=args.seed)
     print(table)
     print(f"saved {saved[0]}, {saved[1]} and one folder per arm")

@@ -15,7 +15,6 @@ from armreach_core.cli.checks import (
     check_counts,
     check_out,
     check_urdf,
-    on_arms,
 )
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 
@@ -72,9 +71,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _corpus(args: argparse.Namespace) -> int:
     """One line per corpus arm: home clearance, determinism, memory, steps/s and IK success per engine."""
-    from armreach_core.diagnostics.corpus import CorpusArm
     from armreach_core.diagnostics.robot_page import save_corpus
-    from armreach_core.diagnostics.robot_report import RobotReport, inspect_corpus, inspect_robot
+    from armreach_core.diagnostics.robot_report import inspect_corpus
 
     options: dict[str, Any] = {
         "env_kwargs": robot_kwargs(args),
@@ -85,17 +83,7 @@ def _corpus(args: argparse.Namespace) -> int:
     }
     out: Path = args.out or Path("runs") / time.strftime("robot-corpus-%Y%m%d-%H%M%S")
     out.mkdir(parents=True, exist_ok=True)
-    if args.arms is None:
-        reports = inspect_corpus(**options)
-    else:
-
-        def one(arm: CorpusArm, urdf: Path) -> RobotReport:
-            started = time.perf_counter()
-            report = inspect_robot(str(urdf), **options)
-            print(f"{arm.name}: {'usable' if report.usable else 'NOT usable'} ({time.perf_counter() - started:.0f} s)")
-            return report
-
-        reports = on_arms(args.arms, one)
+    reports = inspect_corpus(**options, arms=args.arms)
     table, saved = save_corpus(reports, out)
     print(table)
     print(f"saved {saved[0]} and {saved[1]}")

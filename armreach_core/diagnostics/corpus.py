@@ -8,7 +8,7 @@ URDF is. An arm whose package is not installed is reported as missing, never dow
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -88,14 +88,23 @@ def corpus_arm(name: str) -> CorpusArm:
     raise ConfigError(f"no corpus arm {name!r}; the corpus has {', '.join(a.name for a in CORPUS)}")
 
 
-def for_each_corpus_arm(run: Callable[[CorpusArm, Path], T], *, log: Callable[[str], None] = print) -> dict[str, T]:
-    """``run(arm, urdf)`` on every installed corpus arm, in corpus order: the results by arm name.
+def for_each_corpus_arm(
+    run: Callable[[CorpusArm, Path], T],
+    *,
+    log: Callable[[str], None] = print,
+    arms: Sequence[str] | None = None,
+) -> dict[str, T]:
+    """``run(arm, urdf)`` on every installed corpus arm (or on those named in ``arms``, in that
+    order): the results by arm name.
 
     An arm whose package is not installed is skipped, with a line to ``log`` that says how
     to install it.
+
+    Raises:
+        ConfigError: a name in ``arms`` that is not a corpus arm.
     """
     results: dict[str, T] = {}
-    for arm in CORPUS:
+    for arm in CORPUS if arms is None else [corpus_arm(name) for name in arms]:
         path = arm.path
         if path is None:
             log(f"{arm.name}: not installed ({arm.install})")

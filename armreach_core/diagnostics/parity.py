@@ -132,8 +132,10 @@ def run_parity_corpus(
     configs: int = 1000,
     seed: int = 0,
     log: Callable[[str], None] = print,
+    arms: Sequence[str] | None = None,
 ) -> dict[str, dict[str, Any]]:
-    """:func:`run_parity` on every installed corpus arm, each report saved in ``out/<arm>``.
+    """:func:`run_parity` on every installed corpus arm (or those named in ``arms``), each
+    report saved in ``out/<arm>``.
 
     Returns:
         Each arm's numbers (:func:`~armreach_core.diagnostics.parity_report.corpus_row`), by
@@ -147,7 +149,7 @@ def run_parity_corpus(
         log(f"{arm.name}: {'pass' if not failures else 'fail: ' + '; '.join(failures)}")
         return corpus_row(report)
 
-    return for_each_corpus_arm(one, log=log)
+    return for_each_corpus_arm(one, log=log, arms=arms)
 
 
 __all__ = [

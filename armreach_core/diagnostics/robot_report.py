@@ -307,6 +307,7 @@ def inspect_corpus(
     parity_steps: int = 100,
     seed: int = 0,
     log: Callable[[str], None] = print,
+    arms: Sequence[str] | None = None,
 ) -> dict[str, RobotReport]:
     """:func:`inspect_robot` on every installed corpus arm, by arm name; a line per arm goes to ``log``."""
 
@@ -325,4 +326,4 @@ def inspect_corpus(
         log(f"{arm.name}: {verdict} ({time.perf_counter() - started:.0f} s)")
         return report
 
-    return for_each_corpus_arm(one, log=log)
+    return for_each_corpus_arm(one, log=log, arms=arms)
