@@ -145,9 +145,6 @@ MATRIX = [
         ["robustness", "{run}", "--out", "{text}", "--episodes", "1", "--max-episode-steps", "1"],
         OUT_IS_FILE,
         needs=("stable_baselines3",),
-        marks=pytest.mark.xfail(
-            reason=f"cli/robustness.py: {OUT_TRACEBACK}, after every episode ran", raises=FileExistsError
-        ),
     ),
     # experiment
     case(
@@ -175,7 +172,6 @@ MATRIX = [
         ["experiment", "paper", "--out", "{text}"],
         OUT_IS_FILE,
         needs=("stable_baselines3",),
-        marks=pytest.mark.xfail(reason=f"cli/experiment.py: {OUT_TRACEBACK}", raises=FileExistsError),
     ),
     # sweep
     case("sweep", "preset", ["sweep", "{spec_preset}"], PRESET, needs=("stable_baselines3",)),
@@ -422,8 +418,7 @@ def test_refused_with_one_line_and_status_2(
     assert err.rstrip("\n").splitlines()[-1] == errors[0]  # the last line, and the whole error
     assert re.match(r"armreach( [a-z]+)?: error: ", errors[0]), errors[0]
     assert re.search(says, errors[0]), errors[0]
-    if argv[:1] != ["experiment"]:  # cli/experiment.py makes the run folder of its first agent first
-        assert files_under(*watched) == before, "a refused command left files behind"
+    assert files_under(*watched) == before, "a refused command left files behind"
 
 
 def test_the_installed_script_exits_2_with_one_line(tmp_path: Path) -> None:

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.checks import check_backends, check_out
 from armreach_core.plugins.defaults import DEFAULT_BACKEND
 
 
@@ -54,6 +55,8 @@ def run(args: argparse.Namespace) -> int:
     from armreach_core.rl.experiment import paper_contenders, run_experiment
     from armreach_core.rl.report import write_report
 
+    check_out(args.out)
+    check_backends([args.backend])
     out = args.out or runs.default_run_dir("runs", ["experiment", args.name])
     steps: dict[str, int] = {}
     for algo, n in args.steps or []:

@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.checks import check_backends, check_counts, check_out
 from armreach_core.perturb import DEFAULT_EPISODES, DEFAULT_MAX_STEPS
 
 
@@ -35,11 +36,10 @@ def run(args: argparse.Namespace) -> int:
     from armreach_core.rl import runs
     from armreach_core.rl.robustness import Cell, summarize, sweep, write_outputs
 
-    if args.episodes < 1:
-        from armreach_core.errors import ConfigError
-
-        raise ConfigError(f"--episodes must be >= 1, got {args.episodes}")
+    check_counts(episodes=(args.episodes, 1))
+    check_out(args.out)
     backend = args.backend or runs.read_config(args.run_dir).backend
+    check_backends([backend])
 
     def show(cell: Cell) -> None:
         print(f"  {cell.perturbation:>12} {cell.magnitude:<6g} success {100 * cell.success_rate:3.0f}%  "
