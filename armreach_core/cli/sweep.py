@@ -40,6 +40,8 @@ def run(args: argparse.Namespace) -> int:
     if args.cpus is not None and args.cpus < 1:
         raise ConfigError(f"--cpus must be >= 1, got {args.cpus}")
     if args.report_only:
+        if not (out / "runs").is_dir():
+            raise ConfigError(f"{out} holds no trials of a sweep (no runs folder); run the sweep first")
         report = write_report(out, collect(out, spec))
         print(f"report: {report}")
         return 0
