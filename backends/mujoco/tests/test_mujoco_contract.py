@@ -26,7 +26,7 @@ class TestMuJoCoContract(BackendContract):
         hold_rad=3e-6,  # measured 1.05e-6 rad after 1 s at home
         track_rad=3e-6,  # measured 1.03e-6 rad 2 s after a 0.1 rad step
         rest_height_m=5e-5,  # measured 1.90e-5 m into the ground (soft contact)
-        rest_speed_m_s=1e-9,  # measured 2.5e-12 m/s: at rest
+        rest_speed_m_s=1e-11,  # measured 2.5e-12 m/s: at rest
         change_effect_rad=MappingProxyType(
             {
                 "mass": 0.05,  # measured 0.160 rad
