@@ -12,6 +12,14 @@ from armreach_core.robot.ik import solve_with_restarts
 from armreach_core.robot.statics import holdable
 from armreach_core.robot.workspace import reachability_map
 
+#: Arms the IK searches run on in the default run (about 1 s each); every corpus arm runs under ``slow``
+#: (2-10 s each: `pytest tests/test_home.py -m slow --durations=0`).
+IK_FAST = ("ur5", "xarm6")
+
+
+def _ik_arms():
+    return [pytest.param(arm, id=arm.name, marks=[] if arm.name in IK_FAST else [pytest.mark.slow]) for arm in CORPUS]
+
 
 def _load(arm):
     if arm.path is None:
@@ -64,7 +72,7 @@ def test_a_given_base_below_the_ground_is_told_how_far_to_raise_it(tmp_path, ar6
         RobotModel(_sunk(tmp_path, ar6_urdf), base_position=(0, 0, 0))
 
 
-@pytest.mark.parametrize("arm", CORPUS, ids=[a.name for a in CORPUS])
+@pytest.mark.parametrize("arm", _ik_arms())
 def test_ik_with_restarts_reaches_the_reachable_targets(arm):
     robot = _load(arm)
     points = reachability_map(robot).centers(np.full(3, -5.0), np.full(3, 5.0))
@@ -84,7 +92,7 @@ IK_MISS_M = {"so100": 0.035, "so101": 0.0036}
 IK_MISS_DEFAULT_M = 3e-4
 
 
-@pytest.mark.parametrize("arm", CORPUS, ids=[a.name for a in CORPUS])
+@pytest.mark.parametrize("arm", _ik_arms())
 def test_ik_reference_plans_every_task_target_with_every_link_above_the_ground(arm):
     """Low targets most solutions reach with a link in the ground (UR5 with gripper, Z1): the search goes on
     past its restarts until it finds one clear of the ground."""
