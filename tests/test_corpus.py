@@ -10,7 +10,6 @@ of them in the slow tests).
 
 from __future__ import annotations
 
-import functools
 import json
 import math
 from typing import Any
@@ -21,7 +20,6 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from armreach_core.diagnostics.corpus import CORPUS, CorpusArm
-from armreach_core.diagnostics.smoothness import mean_jerk
 from armreach_core.plugins.lookup import load_robot
 from armreach_core.robot.anatomy import MOVABLE_TYPES
 from armreach_core.robot.model import RobotModel
@@ -242,69 +240,7 @@ def test_observation_is_one_consistent_snapshot(arm: CorpusArm, backend: str) ->
         env.close()
 
 
-@functools.cache
-def _parity_runs(arm: CorpusArm) -> dict[str, dict[str, Any]]:
-    """Every parity sequence, 200 steps from home with seed 0, on both engines (run once per arm)."""
-    from armreach_core.diagnostics.parity import SEQUENCES, drive
-    from armreach_core.env import ArmEnv
-
-    envs = {name: ArmEnv("reach", backend=name, urdf=_path(arm)) for name in ("pybullet", "mujoco")}
-    try:
-        return {
-            sequence: {n: drive(env, sequence, steps=200, seed=0) for n, env in envs.items()} for sequence in SEQUENCES
-        }
-    finally:
-        for env in envs.values():
-            env.close()
-
-
-@pytest.mark.skipif(not {"pybullet", "mujoco"} <= set(BACKENDS), reason="needs the PyBullet and MuJoCo backends")
-@pytest.mark.parametrize("arm", _arms())
-def test_engines_agree_in_free_space(arm: CorpusArm) -> None:
-    """Every sequence, 200 steps from home: the same motion on both engines until a moving link
-    first touches something (``armreach parity``'s tolerances, on every arm), and the same
-    smoothness (jerk) throughout the sequences a policy could produce."""
-    from armreach_core.backend import PhysicsConfig
-    from armreach_core.diagnostics.parity import JERK_SEQUENCES, Gap, Tolerances
-
-    tol, dt = Tolerances(), PhysicsConfig().control_dt
-    for sequence, runs in _parity_runs(arm).items():
-        gap = Gap.between(runs["pybullet"], runs["mujoco"])
-        where = f"{arm.name} {sequence}"
-        if gap.free_ee_rms_m is not None:  # None: touching from the first step
-            assert gap.free_ee_rms_m <= tol.ee_rms_m(sequence), f"{where}: {gap.free_ee_rms_m * 1e3:.2f} mm"
-            assert gap.free_joint_rms_rad is not None and gap.free_joint_rms_rad <= tol.joint_rms_rad, where
-        if sequence in JERK_SEQUENCES:
-            jerks = [mean_jerk(run.q, dt) for run in runs.values()]
-            assert max(jerks) <= tol.jerk_ratio * min(jerks), f"{where}: jerk {jerks}"
-
-
-#: Contact phases held at what they measure rather than at ``armreach parity``'s tolerance
-#: (docs/parity.md): Z1's gripper bouncing on the ground under biased actions (26.4 mm against
-#: 25) and pressed onto it (9.98 mm, at the edge of the 10 mm bound).
-CONTACT_MEASURED = {("z1", "biased"): 0.030, ("z1", "press"): 0.012}
-
-
-@pytest.mark.skipif(not {"pybullet", "mujoco"} <= set(BACKENDS), reason="needs the PyBullet and MuJoCo backends")
-@pytest.mark.parametrize("arm", _arms())
-def test_engines_agree_in_contact(arm: CorpusArm) -> None:
-    """Random and biased actions and the IK press: wherever a moving link touches the ground, both
-    engines move the same while in contact, and where the sequence drives into the ground (biased,
-    press) they touch it at most 8 steps apart (measured: 0-2, xArm7's biased run 7)."""
-    from armreach_core.diagnostics.parity import Gap, Tolerances
-
-    tol = Tolerances()
-    for sequence, runs in _parity_runs(arm).items():
-        gap = Gap.between(runs["pybullet"], runs["mujoco"])
-        if gap.contact_step is None:
-            continue  # this sequence stays clear of the ground on this arm
-        firsts = [run.first_contact for run in runs.values()]
-        if sequence in ("biased", "press"):  # the sequences that drive into the ground (random may graze it)
-            assert None not in firsts and abs(firsts[0] - firsts[1]) <= 8, f"{arm.name} {sequence}: {firsts}"
-        bound = CONTACT_MEASURED.get((arm.name, sequence), tol.ee_rms_m(sequence, "contact"))
-        assert gap.contact_ee_rms_m is not None and gap.contact_ee_rms_m <= bound, (
-            f"{arm.name} {sequence}: {gap.contact_ee_rms_m * 1e3:.1f} mm"
-        )
+# Engine parity on every corpus arm, per arm and seed near what it measures: tests/test_parity.py.
 
 
 # `armreach robot --corpus` and `armreach parity --corpus`, on a few arms (--arms) and on all of them.
