@@ -2,20 +2,26 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import os
+import shutil
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 
 from armreach_core.cli import main
 from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
 from armreach_core.rl.config import resolve_config
-from armreach_core.rl.learners import algo_class
-from tests.test_training import TINY as TRAINING_TINY
+from armreach_core.rl.learners import algo_class, policy_parameters
+from tests.conftest import TINY as TRAINING_TINY
+from tests.conftest import TrainedRun
 
 pytestmark = pytest.mark.training
 
@@ -67,30 +73,100 @@ def test_a_missing_learner_names_the_install(monkeypatch: pytest.MonkeyPatch) ->
         algo_class("sac", "sbx")
 
 
-def test_sbx_run_trains_evaluates_and_resumes_like_an_sb3_run(tmp_path: Path, tiny: str) -> None:
-    run_dir = tmp_path / "run"
-    assert main(["train", "--algo", "td3", "--preset", tiny, "--steps", "100", "--out", str(run_dir)]) == 0
+def test_sbx_run_trains_evaluates_and_resumes_like_an_sb3_run(
+    tmp_path: Path, trained_run: Callable[..., TrainedRun]
+) -> None:
+    run_dir = Path(shutil.copytree(trained_run("--algo", "ddpg", "--seed", "3").path, tmp_path / "run"))
     config = runs.read_config(run_dir)
     assert config.learner == "sbx"
-    assert type(algo_class("td3", "sbx").load(run_dir / runs.MODEL, device="cpu")).__module__.startswith("sbx")
-    assert main(["train", "--resume", str(run_dir), "--steps", "200"]) == 0
-    assert json.loads((run_dir / "checkpoint.json").read_text())["timesteps"] == 200
-    assert (run_dir / runs.REPLAY).is_file()  # the replay buffer went on with the run
+    trained = algo_class("ddpg", "sbx").load(run_dir / runs.MODEL, device="cpu")
+    assert type(trained).__module__.startswith("sbx")
+
+    def checkpoint() -> Any:
+        model: Any = algo_class("ddpg", "sbx").load(run_dir / runs.CHECKPOINT, device="cpu")
+        model.load_replay_buffer(run_dir / runs.REPLAY)
+        return model
+
+    assert checkpoint().replay_buffer.size() == 300  # every step of the run
+    assert main(["train", "--resume", str(run_dir), "--steps", "400"]) == 0
+    assert json.loads((run_dir / "checkpoint.json").read_text())["timesteps"] == 400
+    resumed = checkpoint()
+    assert resumed.replay_buffer.size() == 400  # the replay buffer went on with the run
+    before, after = policy_parameters(trained), policy_parameters(resumed)
+    assert before.keys() == after.keys()
+    assert any(not np.array_equal(before[k], after[k]) for k in before)  # and so did learning
     assert main(["evaluate", str(run_dir), "--episodes", "2", "--max-episode-steps", "30"]) == 0
     summary = json.loads((run_dir / "eval-pybullet" / "summary.json").read_text())
     assert summary["episodes"] == 2 and summary["joint_limit_mode"] == "terminate"
 
 
-def test_xla_gets_one_thread_like_torch_unless_the_user_set_it() -> None:
+def test_xla_gets_one_thread_like_torch_unless_the_user_set_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    import torch
+
+    from armreach_core.rl import train
+
+    given: list[int] = []
+    monkeypatch.setattr(train, "configure_xla", given.append)
+    threads = torch.get_num_threads()
+    try:
+        assert (train.configure_threads(0, "cpu"), train.configure_threads(3, "cpu")) == (1, 3)
+    finally:
+        torch.set_num_threads(threads)
+    assert given == [1, 3]  # XLA gets torch's thread count
+    # Whether the user set XLA_FLAGS is noted when armreach is imported: a fresh process, and a
+    # second import (a reload) once the variable is set, as in a process the user started so.
     code = """
-import os
-from armreach_core.rl.train import configure_threads
-configure_threads(0, "cpu")
+import importlib, os
+from armreach_core.rl import learners
+learners.configure_xla(1)
+print(os.environ["XLA_FLAGS"])
+os.environ["XLA_FLAGS"] = "--xla_cpu_multi_thread_eigen=true"
+importlib.reload(learners)
+learners.configure_xla(4)
 print(os.environ["XLA_FLAGS"])
 """
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
-    assert "intra_op_parallelism_threads=1" in out and "--xla_cpu_multi_thread_eigen=false" in out
-    env["XLA_FLAGS"] = "--xla_cpu_multi_thread_eigen=true"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
-    assert out.strip() == "--xla_cpu_multi_thread_eigen=true"
+    ours, users = out.splitlines()
+    assert ours == "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+    assert users == "--xla_cpu_multi_thread_eigen=true"
+
+
+def _monitor(run_dir: Path) -> list[dict[str, str]]:
+    """The run's training episodes, without the wall-clock column."""
+    lines = (run_dir / "monitor" / "0.monitor.csv").read_text().splitlines()[1:]
+    return [{k: v for k, v in row.items() if k != "t"} for row in csv.DictReader(lines)]
+
+
+@pytest.mark.parametrize(
+    ("algo", "extra", "learner"),
+    [("td3", ["--learner", "sb3"], "sb3"), ("ddpg", [], "sbx")],  # runs test_training reads too
+)
+def test_the_same_seed_trains_the_same_model(
+    tmp_path: Path, trained_run: Callable[..., TrainedRun], algo: str, extra: list[str], learner: str
+) -> None:
+    """Same seed and settings: the same parameters, bit for bit, and the same training episodes; another seed not.
+
+    Both learners are deterministic on the CPU: the envs are seeded from the run seed; the
+    networks, the action noise and the replay sampling from the model's. (Measured with 1 and
+    2 threads for torch and XLA alike; armreach's default is 1.)
+    """
+    first = trained_run("--algo", algo, "--seed", "3", *extra)
+    preset = first.argv[first.argv.index("--preset") + 1]
+    again, other = tmp_path / "again", tmp_path / "other"
+    for seed, run_dir in (("3", again), ("4", other)):
+        assert main(["train", "--preset", preset, "--algo", algo, "--seed", seed, *extra, "--out", str(run_dir)]) == 0
+    assert runs.read_config(again).learner == learner
+
+    def parameters(run_dir: Path) -> dict[str, np.ndarray]:
+        return policy_parameters(algo_class(algo, learner).load(run_dir / runs.MODEL, device="cpu"))
+
+    reference = parameters(first.path)
+    assert len(reference) >= 6  # actor, critics and their targets: weights and biases
+    same, different = parameters(again), parameters(other)
+    assert same.keys() == reference.keys() == different.keys()
+    for name, array in reference.items():
+        np.testing.assert_array_equal(same[name], array, err_msg=name)
+    assert _monitor(again) == _monitor(first.path)
+    assert [name for name in reference if not np.array_equal(different[name], reference[name])] == list(reference)
+    assert _monitor(other) != _monitor(first.path)

@@ -1,4 +1,8 @@
-"""Train → evaluate → report on a few hundred steps, interruption and resume, bad run folders."""
+"""Train → evaluate → report on a few hundred steps, interruption and resume, bad run folders.
+
+The runs most tests read are trained once per session (``trained_run`` in conftest.py);
+interruptions, kills and other subprocess trainings are slow tests.
+"""
 
 from __future__ import annotations
 
@@ -7,10 +11,14 @@ import dataclasses
 import json
 import os
 import re
+import shlex
+import shutil
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
+from importlib import metadata
 from pathlib import Path
 
 import numpy as np
@@ -22,42 +30,14 @@ from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
 from armreach_core.rl.config import RunConfig
 from armreach_core.rl.train import train
+from tests.conftest import TINY, TrainedRun
 
 pytestmark = pytest.mark.training
 
-TINY = """
-description: a few hundred steps, for tests
-reach:
-  ppo:
-    timesteps: 256
-    env: {max_episode_steps: 64}
-    policy: {net_arch: [16, 16]}
-    n_steps: 64
-    batch_size: 32
-    n_epochs: 1
-  ddpg: &off
-    timesteps: 300
-    env: {max_episode_steps: 64}
-    policy: {net_arch: [16, 16]}
-    learning_starts: 64
-    batch_size: 32
-    checkpoint_every: 100
-    noise: {type: ornstein-uhlenbeck, sigma: 0.1}
-  td3: *off
-  sac:
-    timesteps: 300
-    env: {max_episode_steps: 64}
-    policy: {net_arch: [16, 16]}
-    learning_starts: 64
-    batch_size: 32
-"""
-
 
 @pytest.fixture
-def tiny(tmp_path: Path) -> str:
-    path = tmp_path / "tiny.yaml"
-    path.write_text(TINY)
-    return str(path)
+def tiny(tiny_preset: Path) -> str:
+    return str(tiny_preset)
 
 
 #: A ``config.yaml`` exactly as armreach wrote it before runs had a typed config (``armreach train
@@ -85,6 +65,7 @@ settings:
     - 16
   learning_starts: 64
   batch_size: 32
+  buffer_size: 1000
   checkpoint_every: 100
   noise:
     type: ornstein-uhlenbeck
@@ -110,6 +91,11 @@ def _monitor_rows(run_dir: Path) -> list[list[str]]:
     return rows
 
 
+def _copy(run: TrainedRun, tmp_path: Path) -> Path:
+    """A copy of a session's run folder that a test may change."""
+    return Path(shutil.copytree(run.path, tmp_path / "run"))
+
+
 @pytest.mark.parametrize(
     ("algo", "extra", "learner"),
     [
@@ -117,51 +103,60 @@ def _monitor_rows(run_dir: Path) -> list[list[str]]:
         ("ddpg", [], "sbx"),
         ("td3", ["--learner", "sb3"], "sb3"),
         ("sac", ["--learner", "sb3"], "sb3"),
-        ("sac", ["--her"], "sbx"),
+        ("sac", ["--her", "--learner", "sb3"], "sb3"),
+        pytest.param("sac", ["--her"], "sbx", marks=pytest.mark.slow),
     ],
 )
 def test_train_then_evaluate(
-    tmp_path: Path, tiny: str, algo: str, extra: list[str], learner: str, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, trained_run: Callable[..., TrainedRun], algo: str, extra: list[str], learner: str
 ) -> None:
-    run_dir = tmp_path / "run"
-    assert main(["train", "--algo", algo, "--preset", tiny, "--seed", "3", "--out", str(run_dir), *extra]) == 0
-    progress_bar = capsys.readouterr().err
-    total = yaml.safe_load((run_dir / "config.yaml").read_text())["timesteps"]
-    assert f"{total}/{total}" in progress_bar and "step/s" in progress_bar  # tqdm's bar, to the end
-    assert re.search(r"success \(last 100 ep\.\) \d+\.\d%", progress_bar)
-    config = yaml.safe_load((run_dir / "config.yaml").read_text())
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    run = trained_run("--algo", algo, "--seed", "3", *extra)
+    config = yaml.safe_load((run.path / "config.yaml").read_text())
+    total = config["timesteps"]
+    assert total == (256 if algo == "ppo" else 300)  # the preset's
+    assert f"{total}/{total}" in run.stderr and "step/s" in run.stderr  # tqdm's bar, to the end
+    assert re.search(r"success \(last 100 ep\.\) \d+\.\d%", run.stderr)
     assert (config["algo"], config["seed"], config["preset"]) == (algo, 3, "tiny")
     assert config["settings"]["policy"]["net_arch"] == [16, 16]
     assert ("her" in config["settings"]) == ("--her" in extra)
     assert config["settings"]["learner"] == learner  # SBX by default off-policy, SB3 for PPO
-    assert (
-        "armreach train --algo" in (run_dir / "command.txt").read_text()
-        or "train" in (run_dir / "command.txt").read_text()
-    )
-    environment = json.loads((run_dir / "environment.json").read_text())
-    assert "stable-baselines3" in environment["versions"]
+    stamp, command = (run.path / "command.txt").read_text().splitlines()
+    assert re.fullmatch(r"# \d{4}-\d\d-\d\dT\d\d:\d\d:\d\d([+-]\d\d:\d\d|Z)", stamp), stamp
+    assert command == shlex.join(["armreach", *run.argv])  # the command, as typed
+    environment = json.loads((run.path / "environment.json").read_text())
+    assert environment["versions"]["stable-baselines3"] == metadata.version("stable-baselines3")
     assert any(p["name"] == "pybullet" for p in environment["plugins"])
-    assert (run_dir / "model.zip").stat().st_size > 0
-    scalars = _tensorboard_scalars(run_dir)
+    model, _, _ = load_from_zip_file(run.path / "model.zip", device="cpu")  # HER's needs an env to load fully
+    assert model is not None
+    assert model["policy_class"].__module__.split(".")[0] == {"sb3": "stable_baselines3", "sbx": "sbx"}[learner]
+    assert model["num_timesteps"] == total
+    scalars = _tensorboard_scalars(run.path)
     # SB3's own names: success comes from the envs' info["is_success"] at each episode's end.
     assert {"rollout/ep_rew_mean", "rollout/success_rate"} <= scalars, scalars
-    rows = _monitor_rows(run_dir)
+    rows = _monitor_rows(run.path)
     assert rows, "the monitor log records finished episodes"
     assert all(int(r[1]) <= 64 for r in rows)  # the preset's training episode length
-    progress = json.loads((run_dir / "checkpoint.json").read_text())
-    assert progress["timesteps"] >= config["timesteps"]
+    assert sum(int(r[1]) for r in rows) <= total
+    progress = json.loads((run.path / "checkpoint.json").read_text())
+    assert progress["timesteps"] == total
     assert progress["train_seconds"] > 0
 
+    run_dir = _copy(run, tmp_path)
     assert main(["evaluate", str(run_dir), "--episodes", "2", "--max-episode-steps", "50"]) == 0
     assert {"eval/success_rate", "eval/mean_reward"} <= _tensorboard_scalars(run_dir)  # as SB3's EvalCallback names
     summary = json.loads((run_dir / "eval-pybullet" / "summary.json").read_text())
-    assert summary["episodes"] == 2
-    assert 0.0 <= summary["success_rate"] <= 1.0
     episodes = list(csv.DictReader((run_dir / "eval-pybullet" / "episodes.csv").read_text().splitlines()))
+    assert summary["episodes"] == len(episodes) == 2
     assert [int(e["seed"]) for e in episodes] == [10_000, 10_001]
+    assert summary["success_rate"] == np.mean([e["success"] == "True" for e in episodes])
+    returns = [float(e["episode_return"]) for e in episodes]
+    assert np.all(np.isfinite(returns))
+    assert summary["final_reward_mean"] == pytest.approx(np.mean(returns))
     for e in episodes:
-        assert int(e["steps"]) <= 50
-        assert np.isfinite(float(e["episode_return"]))
+        assert 1 <= int(e["steps"]) <= 50
+        assert e["ended_by"] != "time_limit" or int(e["steps"]) == 50
 
 
 @pytest.mark.parametrize("algo", ["ddpg", "td3", "sac"])
@@ -201,6 +196,7 @@ def test_same_seed_gives_the_same_evaluation(tmp_path: Path) -> None:
     assert a.episodes == b.episodes
 
 
+@pytest.mark.slow
 def test_interrupt_then_resume_continues_the_step_count(tmp_path: Path, tiny: str) -> None:
     run_dir = tmp_path / "run"
     cmd = [sys.executable, "-m", "armreach_core.cli", "train", "--algo", "ddpg", "--preset", tiny]
@@ -232,15 +228,16 @@ def test_interrupt_then_resume_continues_the_step_count(tmp_path: Path, tiny: st
     assert (run_dir / "command.txt").read_text().count("# ") == 2
 
 
-def test_bad_run_folders_give_clear_errors(tmp_path: Path, tiny: str, capsys: pytest.CaptureFixture[str]) -> None:
+def test_bad_run_folders_give_clear_errors(
+    tmp_path: Path, tiny: str, trained_run: Callable[..., TrainedRun], capsys: pytest.CaptureFixture[str]
+) -> None:
     assert main(["evaluate", str(tmp_path)]) == 2
     assert "not a run folder" in capsys.readouterr().err
-    run_dir = tmp_path / "run"
-    assert main(["train", "--algo", "ddpg", "--preset", tiny, "--steps", "100", "--out", str(run_dir)]) == 0
+    run_dir = _copy(trained_run("--algo", "ddpg", "--seed", "3"), tmp_path)
     assert main(["train", "--algo", "ddpg", "--preset", tiny, "--out", str(run_dir)]) == 2
     assert "already holds a run" in capsys.readouterr().err
     (run_dir / "checkpoint.zip").write_bytes(b"not a zip")
-    config = dataclasses.replace(runs.read_config(run_dir), timesteps=200)
+    config = dataclasses.replace(runs.read_config(run_dir), timesteps=400)
     with pytest.raises(ConfigError, match="cannot load .*checkpoint.zip"):
         train(config, run_dir, resume=True, stream=None)
     (run_dir / "model.zip").write_bytes(b"junk")
@@ -285,13 +282,15 @@ def test_ppo_totals_are_whole_rollouts_and_resume_keeps_the_count(tmp_path: Path
     assert json.loads((run_dir / "checkpoint.json").read_text())["timesteps"] == 256
 
 
-def test_resume_refuses_flags_that_would_change_the_run(tmp_path: Path, tiny: str, capsys) -> None:
-    run_dir = tmp_path / "run"
-    main(["train", "--algo", "ddpg", "--preset", tiny, "--steps", "100", "--out", str(run_dir)])
-    capsys.readouterr()
+def test_resume_refuses_flags_that_would_change_the_run(
+    tmp_path: Path, trained_run: Callable[..., TrainedRun], capsys: pytest.CaptureFixture[str]
+) -> None:
+    run_dir = _copy(trained_run("--algo", "ddpg", "--seed", "3"), tmp_path)
+    before = {p.name: p.read_bytes() for p in run_dir.iterdir() if p.is_file()}
     assert main(["train", "--resume", str(run_dir), "--backend", "mujoco", "--seed", "4"]) == 2
     err = capsys.readouterr().err
     assert "--backend, --seed" in err and "config.yaml" in err
+    assert {p.name: p.read_bytes() for p in run_dir.iterdir() if p.is_file()} == before  # refused before anything
 
 
 def test_a_start_that_failed_before_its_first_checkpoint_can_start_again(tmp_path: Path, tiny: str) -> None:
@@ -300,8 +299,10 @@ def test_a_start_that_failed_before_its_first_checkpoint_can_start_again(tmp_pat
     (run_dir / "config.yaml").write_text("algo: ddpg\n")  # what a crash during model building used to leave
     (run_dir / "monitor").mkdir()
     (run_dir / "monitor" / "0.monitor.csv").write_text('#{"t_start": 0}\nr,l,t\n1,2,3\n')
-    assert main(["train", "--algo", "ddpg", "--preset", tiny, "--steps", "100", "--out", str(run_dir)]) == 0
+    command = ["train", "--algo", "ddpg", "--learner", "sb3", "--preset", tiny, "--steps", "100"]
+    assert main([*command, "--out", str(run_dir)]) == 0
     assert json.loads((run_dir / "checkpoint.json").read_text())["timesteps"] == 100
+    assert ["1", "2", "3"] not in _monitor_rows(run_dir)  # the failed start's log was started over
 
 
 def test_evaluation_is_the_papers_task_whatever_training_used() -> None:
@@ -377,6 +378,7 @@ def _wait_for(path: Path, proc: subprocess.Popen[str], timeout: float = 90.0) ->
     assert path.exists(), proc.stderr.read() if proc.poll() is not None and proc.stderr else "timed out"
 
 
+@pytest.mark.slow
 def test_sigkill_keeps_every_file_readable_and_resume_continues(tmp_path: Path, tiny: str) -> None:
     run_dir = tmp_path / "run"
     proc = _start_training(run_dir, tiny, "--steps", "100000")
@@ -618,12 +620,11 @@ def test_evaluation_can_clip_at_joint_limits_instead_of_ending(
 
 
 def test_evaluate_takes_the_arm_flags_and_refuses_an_arm_the_policy_cannot_drive(
-    tmp_path: Path, tiny: str, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, trained_run: Callable[..., TrainedRun], capsys: pytest.CaptureFixture[str]
 ) -> None:
     from armreach_core.diagnostics.corpus import corpus_arm
 
-    run_dir = tmp_path / "run"
-    assert main(["train", "--algo", "ppo", "--preset", tiny, "--out", str(run_dir)]) == 0
+    run_dir = _copy(trained_run("--algo", "ppo", "--seed", "3"), tmp_path)
     flags = ["--episodes", "1", "--max-episode-steps", "20"]
     assert main(["evaluate", str(run_dir), *flags, "--base-position", "0.3", "0", "0.1"]) == 0
     assert (run_dir / "eval-pybullet-arm" / "summary.json").is_file()

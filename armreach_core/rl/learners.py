@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 from armreach_core.errors import ConfigError
 
 if TYPE_CHECKING:
+    import numpy.typing as npt
     from stable_baselines3.common.base_class import BaseAlgorithm
 
 LEARNERS = ("sb3", "sbx")
@@ -124,6 +125,36 @@ def optimizer_kwargs(learner: str, algo: str) -> dict[str, Any]:
     whose policy sets its own Adam betas. SBX's optax optimizers are compiled by XLA already.
     """
     return {"optimizer_kwargs": {"fused": True}} if learner == "sb3" and algo != "crossq" else {}
+
+
+def policy_parameters(model: BaseAlgorithm) -> dict[str, npt.NDArray[Any]]:
+    """The learned arrays of ``model`` by name, as NumPy arrays, whichever learner trained it.
+
+    SB3: the policy's ``state_dict`` (networks and target networks) and SAC's entropy
+    coefficient. SBX: ``params`` and ``target_params`` of each Flax train state of the policy
+    and of the model (SAC's entropy coefficient is one). Optimizer states are left out. Two
+    models trained alike hold equal arrays under equal names.
+    """
+    import numpy as np
+
+    if type(model).__module__.split(".")[0] == "sbx":
+        import jax
+        from flax.training.train_state import TrainState
+
+        owners = {"policy": vars(model.policy), "model": vars(model)}
+        tree = {
+            f"{owner}.{name}": {"params": state.params, "target_params": getattr(state, "target_params", None)}
+            for owner, attributes in owners.items()
+            for name, state in attributes.items()
+            if isinstance(state, TrainState)
+        }
+        leaves, _ = jax.tree_util.tree_flatten_with_path(tree)
+        return {jax.tree_util.keystr(path): np.asarray(leaf) for path, leaf in leaves}
+    arrays = {name: tensor.detach().cpu().numpy() for name, tensor in model.policy.state_dict().items()}
+    log_ent_coef = getattr(model, "log_ent_coef", None)
+    if log_ent_coef is not None:
+        arrays["log_ent_coef"] = log_ent_coef.detach().cpu().numpy()
+    return arrays
 
 
 def configure_xla(threads: int = 1) -> None:
