@@ -27,6 +27,7 @@ reach:
     policy: {net_arch: [16, 16]}
     learning_starts: 50
     batch_size: 32
+    buffer_size: 1000
     demonstrations: {episodes: 3, share: 0.25}
 """
 
@@ -64,13 +65,19 @@ def test_each_batch_draws_its_share_from_the_demonstrations() -> None:
     assert np.all(batch.observations.numpy()[:48] == 0)
 
 
-def test_a_run_with_demonstrations_records_them_and_resumes(tmp_path: Path) -> None:
+@pytest.mark.parametrize("learner", ["sb3", pytest.param("sbx", marks=pytest.mark.slow)])
+def test_a_run_with_demonstrations_records_them_and_resumes(tmp_path: Path, learner: str) -> None:
     preset = tmp_path / "demos.yaml"
     preset.write_text(DEMOS)
     run_dir = tmp_path / "run"
-    assert main(["train", "--algo", "sac", "--preset", str(preset), "--out", str(run_dir)]) == 0
+    assert main(["train", "--algo", "sac", "--preset", str(preset), "--learner", learner, "--out", str(run_dir)]) == 0
+    assert runs.read_config(run_dir).learner == learner
     record = json.loads((run_dir / runs.DEMONSTRATIONS).read_text())
-    assert record["episodes"] == 3 and record["steps"] > 3 and record["success_rate"] == 1.0
+    env = ArmEnv("reach", max_episode_steps=40, distance_exponent=1.0)
+    expected = _buffer(env, 0.25)
+    steps, _ = collect(env, expected, 3)  # the same seeded episodes the run collected
+    env.close()
+    assert record == {"episodes": 3, "steps": steps, "success_rate": 1.0}
     assert main(["train", "--resume", str(run_dir), "--steps", "300"]) == 0
     assert json.loads((run_dir / runs.PROGRESS).read_text())["timesteps"] == 300
     from stable_baselines3.common.save_util import load_from_pkl

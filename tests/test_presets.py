@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -53,38 +54,66 @@ def _ou_sigma(noise: Callable[[], np.ndarray], n_actions: int, draws: int = 4000
     return float(np.diff(samples, axis=0).std() / np.sqrt(0.01))
 
 
-def test_paper_models_are_built_with_those_settings(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("algo", "learner"),
+    [
+        ("ppo", "sb3"),
+        ("ddpg", "sb3"),
+        # SBX's first model compiles each of Flax's initialisation steps for the CPU: seconds on 2 cores
+        pytest.param("ddpg", "sbx", marks=pytest.mark.slow),
+    ],
+)
+def test_paper_models_are_built_with_those_settings(tmp_path: Path, algo: str, learner: str) -> None:
     import torch
     from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
 
     from armreach_core.rl.agents import build_model, make_vec_env
 
-    for algo, learner in (("ppo", "sb3"), ("ddpg", "sb3"), ("ddpg", "sbx")):
-        config = resolve_config(algo=algo, preset="paper", learner=learner)
-        env = make_vec_env(config, tmp_path / f"{algo}-{learner}", 0, 1, append=False)
-        model = build_model(algo, config.settings, env, 0, None, "cpu")
-        assert model.gamma == 0.99
-        assert model.batch_size == 300
-        if algo == "ppo":
-            assert model.n_steps == 2048
-            assert model.learning_rate == 3e-4
-            layers = [m for m in model.policy.mlp_extractor.policy_net if isinstance(m, torch.nn.Linear)]
-            assert [m.out_features for m in layers] == [128, 128]
-            assert any(isinstance(m, torch.nn.ReLU) for m in model.policy.mlp_extractor.policy_net)
-        else:
-            assert model.tau == 0.005
-            assert model.learning_rate == 1e-3
-            assert isinstance(model.action_noise, OrnsteinUhlenbeckActionNoise)
-            assert _ou_sigma(model.action_noise, n_actions=6) == pytest.approx(0.1, rel=0.05)
-            if learner == "sb3":
-                layers = [m for m in model.actor.mu if isinstance(m, torch.nn.Linear)]
-                assert [m.out_features for m in layers][:2] == [256, 256]
-            else:
-                import flax.linen as nn
+    config = resolve_config(algo=algo, preset="paper", learner=learner)
+    env = make_vec_env(config, tmp_path, 0, 1, append=False)
+    model = build_model(algo, config.settings, env, 0, None, "cpu")
+    env.close()
+    assert type(model).__module__.split(".")[0] == {"sb3": "stable_baselines3", "sbx": "sbx"}[learner]
+    assert model.gamma == 0.99
+    assert model.batch_size == 300
+    if algo == "ppo":
+        assert model.n_steps == 2048
+        assert model.learning_rate == 3e-4
+        layers = [m for m in model.policy.mlp_extractor.policy_net if isinstance(m, torch.nn.Linear)]
+        assert [m.out_features for m in layers] == [128, 128]
+        assert any(isinstance(m, torch.nn.ReLU) for m in model.policy.mlp_extractor.policy_net)
+        return
+    assert model.tau == 0.005
+    assert model.learning_rate == 1e-3
+    assert isinstance(model.action_noise, OrnsteinUhlenbeckActionNoise)
+    assert _ou_sigma(model.action_noise, n_actions=6) == pytest.approx(0.1, rel=0.05)
+    if learner == "sb3":
+        layers = [m for m in model.actor.mu if isinstance(m, torch.nn.Linear)]
+        assert [m.out_features for m in layers][:2] == [256, 256]
+        assert any(isinstance(m, torch.nn.ReLU) for m in model.actor.mu)
+    else:
+        import flax.linen as nn
 
-                assert model.policy.actor.net_arch == model.policy.qf.net_arch == [256, 256]
-                assert model.policy.actor.activation_fn is nn.relu
-        env.close()
+        assert model.policy.actor.net_arch == model.policy.qf.net_arch == [256, 256]
+        assert model.policy.actor.activation_fn is nn.relu
+
+
+def test_paper_sbx_models_get_those_settings(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """What armreach hands SBX for the paper's DDPG, without SBX building (and XLA compiling) the networks."""
+    import flax.linen as nn
+
+    from armreach_core.rl.agents import build_model, make_vec_env
+    from armreach_core.rl.learners import algo_class
+
+    config = resolve_config(algo="ddpg", preset="paper", learner="sbx")
+    monkeypatch.setattr(algo_class("ddpg", "sbx"), "_setup_model", lambda self: None)
+    env = make_vec_env(config, tmp_path, 0, 1, append=False)
+    model: Any = build_model("ddpg", config.settings, env, 0, None, "cpu")
+    env.close()
+    assert (model.gamma, model.batch_size, model.tau, model.learning_rate) == (0.99, 300, 0.005, 1e-3)
+    assert model.policy_kwargs["net_arch"] == [256, 256]
+    assert model.policy_kwargs["activation_fn"] is nn.relu
+    assert _ou_sigma(model.action_noise, n_actions=6) == pytest.approx(0.1, rel=0.05)
 
 
 @pytest.mark.parametrize(

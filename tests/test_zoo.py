@@ -13,6 +13,7 @@ from tests.conftest import BACKENDS
 
 pytestmark = [
     pytest.mark.training,
+    pytest.mark.slow,  # a subprocess training and replay each: tens of seconds
     pytest.mark.skipif(not BACKENDS, reason="no physics backend installed"),
 ]
 pytest.importorskip("rl_zoo3")
