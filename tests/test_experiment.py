@@ -2,27 +2,59 @@
 
 from __future__ import annotations
 
+import csv
 import io
-import re
+from collections import Counter
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 from PIL import Image
 
 from armreach_core.cli import main
-from armreach_core.rl.experiment import Contender, run_experiment
-from armreach_core.rl.report import write_report
+from armreach_core.rl.evaluate import ENDINGS
+from armreach_core.rl.experiment import PAPER, REWARD_WINDOW, Contender, run_experiment
+from armreach_core.rl.report import IK_LABEL, write_report
 
 pytestmark = pytest.mark.training
 
+#: SB3 for DDPG as for PPO: what is tested is the experiment's bookkeeping, not a learner.
 TINY = """
 description: tiny
 reach:
   ppo: {timesteps: 128, env: {max_episode_steps: 32}, policy: {net_arch: [8]}, n_steps: 64, batch_size: 32}
-  ddpg: {timesteps: 150, env: {max_episode_steps: 32}, policy: {net_arch: [8]}, learning_starts: 50, batch_size: 16}
+  ddpg: {timesteps: 150, env: {max_episode_steps: 32}, policy: {net_arch: [8]}, learning_starts: 50, batch_size: 16,
+         buffer_size: 1000, learner: sb3}
 """
 
 
+def _table(text: str, heading: str) -> dict[str, dict[str, str]]:
+    """The table under ``## heading`` of a report: each row by its first cell, as {column: cell}."""
+    section = text.split(f"\n## {heading}", 1)[1].split("\n## ", 1)[0]
+    lines = [line[2:-2].split(" | ") for line in section.splitlines() if line.startswith("| ")]
+    return {cells[0]: dict(zip(lines[0], cells, strict=True)) for cells in lines[1:]}
+
+
+def _mean_std(values: list[float], digits: int) -> str:
+    """Mean ± sample standard deviation over seeds, as the report writes it."""
+    if not values:
+        return "n/a"
+    if len(values) == 1:
+        return f"{values[0]:.{digits}f}"
+    return f"{np.mean(values):.{digits}f} ± {np.std(values, ddof=1):.{digits}f}"
+
+
+def _episodes(run_dir: Path) -> list[dict[str, str]]:
+    return list(csv.DictReader((run_dir / "eval-pybullet" / "episodes.csv").read_text().splitlines()))
+
+
+def _training_returns(run_dir: Path) -> list[float]:
+    lines = (run_dir / "monitor" / "0.monitor.csv").read_text().splitlines()[1:]
+    return [float(row["r"]) for row in csv.DictReader(lines)]
+
+
+@pytest.mark.slow
 def test_experiment_writes_the_report_and_figures(tmp_path: Path) -> None:
     preset = tmp_path / "tiny.yaml"
     preset.write_text(TINY)
@@ -34,21 +66,52 @@ def test_experiment_writes_the_report_and_figures(tmp_path: Path) -> None:
     assert sorted(p.name for p in out.iterdir()) == ["ddpg-tiny-s0", "ddpg-tiny-s1", "ik", "ppo-tiny-s0", "ppo-tiny-s1"]
     report = write_report(out, results, ik, episodes=2, backend="pybullet", command="armreach experiment paper")
     text = report.read_text()
-    for heading in ("Table 2", "Table 3", "Table 4"):
-        assert heading in text
-    # The paper's numbers sit beside ours, and the IK reference reaches everything.
-    assert re.search(r"\| PPO \| 177 ± 25 \|", text)
-    assert re.search(r"\| DDPG \| 69 / \d+ ± \d+ \|", text)
-    assert re.search(r"\| DLS inverse kinematics \(reference\) \| – \| 100 \|", text)
-    # Over seeds: the interquartile mean with its bootstrap interval, and how episodes ended.
-    over_seeds = text.split("## Over seeds")[1].split("## Figures")[0]
-    for r, label in zip(results, ("PPO", "DDPG"), strict=True):
-        row = next(line for line in over_seeds.splitlines() if line.startswith(f"| {label} |"))
-        assert f"| 2 | {r.success_iqm().format(100.0, 0, ' %')} |" in row
-        assert f"time limit {r.ended_by().get('time_limit', 0)}" in row
-        assert sum(r.ended_by().values()) == 4  # 2 seeds x 2 episodes, each counted once
-    for name in ("learning_curves.png", "progress.png", "jerk.png", "rollout.png", "rollout.gif"):
-        assert f"]({name})" in text or name == "rollout.gif"
+    # Every number of the tables, against the run folders the report was made from and the paper's figures.
+    table2, table3 = _table(text, "Table 2"), _table(text, "Table 3")
+    over_seeds = _table(text, "Over seeds")
+    for label, algo in (("PPO", "ppo"), ("DDPG", "ddpg")):
+        paper: dict[str, Any] = PAPER[label]
+        run_dirs = [out / f"{algo}-tiny-s{seed}" for seed in (0, 1)]
+        returns = [_training_returns(d) for d in run_dirs]
+        assert all(0 < len(r) < 100 for r in returns)  # too few episodes for the convergence rule's 100
+        episodes = [_episodes(d) for d in run_dirs]
+        rates = [float(np.mean([e["success"] == "True" for e in seed])) for seed in episodes]
+        successes = [[int(e["steps"]) for e in seed if e["success"] == "True"] for seed in episodes]
+        steps = [float(np.mean(s)) for s in successes if s]  # over the seeds that reached a goal
+        final = [float(np.mean(r[-REWARD_WINDOW:])) for r in returns]  # the last moving average, per seed
+        assert table2[label] == {
+            "agent": label,
+            "convergence episode (paper)": f"{paper['convergence'][0]} ± {paper['convergence'][1]}",
+            "convergence episode (ours)": "not reached",
+            "final avg. reward (paper)": f"{paper['final_reward'][0]} ± {paper['final_reward'][1]}",
+            "final avg. reward (ours)": _mean_std(final, 2) + " †",
+        }
+        assert table3[label] == {
+            "agent": label,
+            "success % (paper)": str(paper["success"]),
+            "success % (ours)": _mean_std([100 * r for r in rates], 0),
+            "steps to goal (paper)": f"{paper['steps'][0]} ± {paper['steps'][1]}",
+            "steps to goal (ours)": _mean_std(steps, 0),
+        }
+        # Over seeds: the interquartile mean of two rates is their mean; its bootstrap interval lies between them.
+        row = over_seeds[label]
+        success = row["success, IQM [95 % CI]"]
+        assert success.startswith(f"{100 * np.mean(rates):.0f} % [")
+        low, high = (float(x) for x in success.split("[")[1].rstrip("]").split(", "))
+        assert 100 * min(rates) - 0.5 <= low <= high <= 100 * max(rates) + 0.5
+        ended = Counter(e["ended_by"] for seed in episodes for e in seed)
+        assert row["episodes ended by"] == ", ".join(f"{k.replace('_', ' ')} {ended[k]}" for k in ENDINGS)
+        assert row["seeds"] == "2"
+    ik_episodes = _episodes(out / "ik")
+    ik_steps = [int(e["steps"]) for e in ik_episodes]
+    assert all(e["success"] == "True" for e in ik_episodes)  # the IK reference reaches everything
+    assert table3[IK_LABEL]["success % (ours)"] == "100"
+    assert table3[IK_LABEL]["steps to goal (ours)"] == (
+        f"{np.mean(ik_steps):.1f} ± {np.std(ik_steps, ddof=1):.1f} (over episodes)"
+    )
+    assert "## Table 4" in text
+    for name in ("learning_curves.png", "progress.png", "jerk.png", "rollout.png"):
+        assert f"]({name})" in text
         assert (out / name).stat().st_size > 1000
     with Image.open(out / "rollout.gif") as gif:
         assert gif.n_frames > 5

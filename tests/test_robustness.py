@@ -144,8 +144,16 @@ def test_robustness_command_writes_its_files(tmp_path: Path) -> None:
     assert {row["perturbation"] for row in rows} == set(STRONG)
     nominal = [r for r in rows if r["perturbation"] == "mass" and float(r["magnitude"]) == 1.0]
     assert float(nominal[0]["success_rate"]) == 1.0  # the IK reference reaches its target unperturbed
+    # The report's row of each perturbation: the worst and the mean success of its cells in the CSV.
     report = (out / "robustness.md").read_text(encoding="utf-8")
-    assert "| effort |" in report and "worst" in report
+    table = [line[2:-2].split(" | ") for line in report.splitlines() if line.startswith("| ")]
+    assert table[0][3:6] == ["worst (magnitude)", "worst steps", "mean"]
+    by_row = {cells[0]: cells for cells in table[1:]}
+    assert set(by_row) == set(STRONG)
+    for key, cells in by_row.items():
+        rates = [float(r["success_rate"]) for r in rows if r["perturbation"] == key]
+        assert cells[3].startswith(f"{100 * min(rates):.0f} (")
+        assert cells[5] == f"{100 * np.mean(rates):.0f}"
 
 
 @pytest.mark.slow
