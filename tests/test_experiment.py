@@ -126,7 +126,10 @@ def test_experiment_writes_the_report_and_figures(tmp_path: Path) -> None:
 def test_experiment_command(tmp_path: Path) -> None:
     out = tmp_path / "exp"
     assert main(["experiment", "paper", "--seeds", "1", "--steps", "300", "--episodes", "2", "--out", str(out)]) == 0
-    assert (out / "report.md").is_file()
+    report = (out / "report.md").read_text()
+    for label, folder in (("PPO", "ppo-paper-s0"), ("DDPG", "ddpg-paper-s0")):
+        assert f"- {label}, seed 0: `{folder}`" in report
+        assert (out / folder / "eval-pybullet" / "summary.json").is_file()
 
 
 def test_an_experiment_folder_is_not_silently_reused_with_other_settings(tmp_path: Path) -> None:

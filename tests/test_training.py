@@ -627,7 +627,7 @@ def test_evaluate_takes_the_arm_flags_and_refuses_an_arm_the_policy_cannot_drive
     run_dir = _copy(trained_run("--algo", "ppo", "--seed", "3"), tmp_path)
     flags = ["--episodes", "1", "--max-episode-steps", "20"]
     assert main(["evaluate", str(run_dir), *flags, "--base-position", "0.3", "0", "0.1"]) == 0
-    assert (run_dir / "eval-pybullet-arm" / "summary.json").is_file()
+    assert json.loads((run_dir / "eval-pybullet-arm" / "summary.json").read_text())["episodes"] == 1
     assert not (run_dir / "eval-pybullet").exists()  # the run's own evaluation is never overwritten
     xarm7 = corpus_arm("xarm7").path or pytest.skip("example-robot-data is not installed")
     capsys.readouterr()
