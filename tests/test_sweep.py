@@ -399,7 +399,7 @@ def test_local_sweep_runs_every_trial_into_a_run_folder_and_one_report(tmp_path:
     for trial in spec.trials():  # normal run folders: `armreach evaluate` works on each
         run_dir = out / "runs" / trial.id
         assert json.loads((run_dir / TRIAL_RECORD).read_text())["action"] == "training"
-        assert evaluate_run(run_dir, episodes=1).episodes[0].steps >= 1
+        assert len(evaluate_run(run_dir, episodes=1).episodes) == 1
     # --report-only: the same report again from the run folders, nothing trained
     models = {p: p.stat().st_mtime_ns for p in (out / "runs").glob("*/model.zip")}
     for name in ("report.md", "trials.csv", "trials.json", "curves.png"):
