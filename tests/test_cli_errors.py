@@ -51,9 +51,7 @@ def required(command: str, what: str) -> str:
 
 
 #: Not run: the error comes only once Ray has started a trial (seconds to minutes, and processes).
-AFTER_RAY = "checked only inside a Ray trial, after Ray started"
 #: Known gaps of commands whose modules are not the CLI's own: a traceback on an --out that is a file.
-OUT_TRACEBACK = "an --out that is a file ends in FileExistsError with a traceback"
 
 
 def case(command: str, kind: str, argv: list[str], says: str, *, needs: tuple[str, ...] = (), marks: Any = ()) -> Any:
@@ -194,16 +192,12 @@ MATRIX = [
         "not-xml",
         ["sweep", "{spec_text}"],
         NOT_XML,
-        marks=pytest.mark.xfail(reason=f"rl/sweep_spec.py: a file that is not a URDF is {AFTER_RAY}", run=False),
     ),
     case(
         "sweep",
         "not-robot",
         ["sweep", "{spec_html}"],
         NOT_ROBOT,
-        marks=pytest.mark.xfail(
-            reason=f"rl/sweep_spec.py: an XML file that is not a <robot> is {AFTER_RAY}", run=False
-        ),
     ),
     case(
         "sweep",
@@ -211,7 +205,6 @@ MATRIX = [
         ["sweep", "{spec_ok}", "--out", "{text}"],
         OUT_IS_FILE,
         needs=("stable_baselines3", "ray"),
-        marks=pytest.mark.xfail(reason=f"cli/sweep.py: {OUT_TRACEBACK}", raises=FileExistsError),
     ),
     # tune
     case(
@@ -219,14 +212,12 @@ MATRIX = [
         "preset",
         ["tune", "--algo", "ppo", "--preset", "nosuch"],
         PRESET,
-        marks=pytest.mark.xfail(reason=f"rl/tune.py: the preset is {AFTER_RAY}", run=False),
     ),
     case(
         "tune",
         "backend",
         ["tune", "--algo", "ppo", "--backend", "nosuch"],
         BACKEND,
-        marks=pytest.mark.xfail(reason=f"rl/tune.py: the backend is {AFTER_RAY}", run=False),
     ),
     case("tune", "unknown-flag", ["tune", "--algo", "ppo", "--no-such-flag"], unknown_flag("tune")),
     case("tune", "bad-value", ["tune", "--algo", "ppo", "--trials", "x"], bad_int("tune", "--trials")),
@@ -242,10 +233,6 @@ MATRIX = [
         "steps-below-report-every",
         ["tune", "--algo", "ppo", "--steps", "10"],
         r"--steps.*--report-every",
-        marks=pytest.mark.xfail(
-            reason="rl/tune.py: --steps below --report-every ends in an AssertionError from ASHA, after Ray started",
-            run=False,
-        ),
     ),
     case("tune", "missing-argument", ["tune"], required("tune", "--algo")),
     case(
@@ -260,16 +247,12 @@ MATRIX = [
         "not-xml",
         ["tune", "--algo", "ppo", "--urdf", "{text}"],
         NOT_XML,
-        marks=pytest.mark.xfail(reason=f"rl/sweep_spec.py: a file that is not a URDF is {AFTER_RAY}", run=False),
     ),
     case(
         "tune",
         "not-robot",
         ["tune", "--algo", "ppo", "--urdf", "{html}"],
         NOT_ROBOT,
-        marks=pytest.mark.xfail(
-            reason=f"rl/sweep_spec.py: an XML file that is not a <robot> is {AFTER_RAY}", run=False
-        ),
     ),
     case(
         "tune",
@@ -277,7 +260,6 @@ MATRIX = [
         ["tune", "--algo", "ppo", "--out", "{text}"],
         OUT_IS_FILE,
         needs=("stable_baselines3", "ray"),
-        marks=pytest.mark.xfail(reason=f"rl/tune.py: {OUT_TRACEBACK}", raises=FileExistsError),
     ),
     # rollout
     case("rollout", "backend", ["rollout", "--backend", "nosuch"], BACKEND),

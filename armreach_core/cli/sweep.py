@@ -7,6 +7,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.checks import check_out
+
 
 def add_parser(sub: Any) -> None:
     parser = sub.add_parser(
@@ -35,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
     from armreach_core.rl.sweep import collect, load_spec, missing_trials, run_sweep
     from armreach_core.rl.sweep_report import write_report
 
+    check_out(args.out)
     spec = load_spec(args.spec)
     out: Path = args.out or Path("runs") / f"sweep-{spec.name}"
     if args.cpus is not None and args.cpus < 1:

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.checks import check_out
 from armreach_core.cli.robot_args import add_robot_arguments
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 
@@ -34,7 +35,9 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from armreach_core.rl.sweep_spec import parse_arm
-    from armreach_core.rl.tune import TuneSpec, load_space, run_tune
+    from armreach_core.rl.tune import TuneSpec, check_tune_spec, load_space, run_tune
+
+    check_out(args.out)
 
     arm = parse_arm(
         {
@@ -50,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
         args.algo, args.preset, args.task, args.backend, arm, args.steps, args.episodes, args.seed, args.trials,
         args.report_every, name=f"tune-{args.algo}",
     )  # fmt: skip
+    check_tune_spec(spec)
     out: Path = args.out or Path("runs") / f"tune-{args.algo}"
     space = load_space(args.space) if args.space is not None else None
     best = run_tune(spec, out, space, address=args.address, cpus=args.cpus, resume=args.resume)

@@ -91,6 +91,9 @@ def resolve_arm_urdf(urdf: str | None, where: str) -> tuple[str, str | None]:
         raise ConfigError(
             f"{where}: {urdf!r} is neither a URDF file nor a corpus arm ({', '.join(sorted(names))}); fix the path"
         )
+    from armreach_core.robot.urdf import read_urdf
+
+    read_urdf(path)  # a file that is no URDF is refused here, before any trial starts
     return path.stem, str(path.resolve())
 
 

@@ -134,6 +134,28 @@ def score(success: float, steps_to_95: float, steps: int) -> float:
     return success + TIME_BONUS * early
 
 
+def check_tune_spec(spec: TuneSpec) -> None:
+    """What can be checked before Ray starts: counts, the preset and the backend.
+
+    Raises:
+        ConfigError: a count that is not positive, fewer steps than one report (the pruner
+            would have nothing to compare), or a preset or backend that does not exist.
+        BackendUnavailableError: the backend is not installed.
+    """
+    from armreach_core.plugins.lookup import load_backend_class
+    from armreach_core.rl.presets import load_preset
+
+    if spec.trials < 1 or spec.steps < 1 or spec.report_every < 1:
+        raise ConfigError("--trials, --steps and --report-every must be positive")
+    if spec.steps < spec.report_every:
+        raise ConfigError(
+            f"--steps {spec.steps} is fewer than --report-every {spec.report_every}: a trial must report at least "
+            "once; lower --report-every or raise --steps"
+        )
+    load_preset(spec.preset)
+    load_backend_class(spec.backend)
+
+
 def run_tune(
     spec: TuneSpec,
     out: Path,
@@ -150,8 +172,7 @@ def run_tune(
     from ray.tune.schedulers import ASHAScheduler
     from ray.tune.search.optuna import OptunaSearch
 
-    if spec.trials < 1 or spec.steps < 1 or spec.report_every < 1:
-        raise ConfigError("--trials, --steps and --report-every must be positive")
+    check_tune_spec(spec)
     distributions = optuna_space(space or default_space(spec.algo))
     out = out.resolve()
     out.mkdir(parents=True, exist_ok=True)
