@@ -7,10 +7,12 @@ import threading
 import time
 
 import pytest
+from lxml import etree
 
 import armreach_core
 from armreach_core import URDFError
 from armreach_core.robot.model import RobotModel
+from armreach_core.robot.urdf import MAX_LINE_BYTES, MAX_URDF_BYTES, read_urdf
 
 LINK = '<link name="{0}"><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>'
 JOINT = (
@@ -136,7 +138,11 @@ UPPER_ARM_INERTIA = 'ixx="0.132451" ixy="0" ixz="0" iyy="0.132451" iyz="0" izz="
 @pytest.mark.parametrize(
     ("old", "new", "message"),
     [
-        ('<mass value="8.393"/>', '<mass value="-8.393"/>', r"value='-8.393' of <mass>.*'upper_arm_link' must be >= 0"),
+        (
+            '<mass value="8.393"/>',
+            '<mass value="-8.393"/>',
+            r"value='-8.393' of <mass>.*'upper_arm_link' must be >= 0; a mass is never negative: give the link's mass",
+        ),
         ('<mass value="8.393"/>', '<mass value="nan"/>', r"value='nan' of <mass>.*not a number.*no nan, inf"),
         ('<mass value="8.393"/>', '<mass value="1e400"/>', "overflows a double"),
         ('<mass value="8.393"/>', '<mass value="1e300"/>', r"beyond ±1e\+06"),
@@ -162,6 +168,28 @@ UPPER_ARM_INERTIA = 'ixx="0.132451" ixy="0" ixz="0" iyy="0.132451" iyz="0" izz="
             "</robot>",
             "joint name 'world_joint' is used twice",
         ),
+        (
+            '<parent link="world"/>',
+            '<parent link="wrld"/>',
+            r"<parent link='wrld'> of joint 'world_joint' names no link",
+        ),
+        ('<child link="base_link"/>', "<child/>", r"<child> of joint 'world_joint' has no link= attribute; name"),
+        ('type="fixed"', "", r"joint 'world_joint' has no type= attribute; give it one of revolute"),
+        (
+            'type="revolute"',
+            'type="planar"',
+            r"'shoulder_pan_joint' has type 'planar'; armreach simulates a fixed-base",
+        ),
+        (
+            '<robot name="ar6">',
+            '<robot xmlns="http://x" name="ar6">',
+            r"in the XML namespace 'http://x'.*remove the xmlns",
+        ),
+        (
+            'lower="-6.283185" upper="6.283185"',
+            'lower="1" upper="1"',
+            r"revolute joint 'shoulder_pan_joint' has lower limit 1.0 >= upper limit 1.0, so it cannot move; give it a",
+        ),
     ],
 )
 def test_bad_numbers_and_names_are_urdf_errors_naming_the_element(tmp_path, ar6_urdf, old, new, message):
@@ -179,13 +207,66 @@ def test_too_many_links_is_a_urdf_error(tmp_path):
         RobotModel(_write(tmp_path, body))
 
 
-def test_a_file_over_the_size_limit_fails_fast(tmp_path, monkeypatch):
-    from armreach_core.robot import urdf
+def _padded(tmp_path, size: int):
+    """A two-link arm padded with one XML comment to exactly ``size`` bytes."""
+    body = LINK.format("a") + LINK.format("b") + JOINT.format("j", "a", "b")
+    head = f'<?xml version="1.0"?>\n<robot name="t">{body}</robot>\n<!--'.encode()
+    path = tmp_path / "padded.urdf"
+    with open(path, "wb") as handle:
+        handle.write(head)
+        handle.write(b" " * (size - len(head) - len(b"-->\n")))
+        handle.write(b"-->\n")
+    assert path.stat().st_size == size
+    return path
 
-    monkeypatch.setattr(urdf, "MAX_URDF_BYTES", 4096)
-    path = _write(tmp_path, LINK.format("a") + LINK.format("b") + JOINT.format("j", "a", "b") + " " * 4096)
-    with pytest.raises(URDFError, match="over the 4096-byte limit"):
-        RobotModel(path)
+
+def test_a_file_just_over_the_size_limit_is_refused_at_once_naming_the_limit(tmp_path):
+    path = _padded(tmp_path, MAX_URDF_BYTES + 1)
+    start = time.perf_counter()
+    with pytest.raises(
+        URDFError, match=rf"is {MAX_URDF_BYTES + 1} bytes, over armreach's limit of {MAX_URDF_BYTES} "
+    ) as info:
+        read_urdf(path)
+    assert time.perf_counter() - start < 0.5  # refused before reading
+    assert "(MAX_URDF_BYTES)" in str(info.value) and "strip padding and long comments" in str(info.value)
+
+
+def test_a_file_just_under_the_size_limit_reads(tmp_path):
+    parsed = read_urdf(_padded(tmp_path, MAX_URDF_BYTES))
+    assert [link.name for link in parsed.model.robot.links] == ["a", "b"]
+    assert len(parsed.resolved_xml) < 4096  # the comment is dropped
+
+
+def test_a_dtd_in_utf16_is_refused_as_in_utf8(tmp_path):
+    """The byte scan for <!DOCTYPE cannot see it in UTF-16; the parsed document shows it."""
+    body = f'<robot name="&x;">{LINK.format("a")}{LINK.format("b")}{JOINT.format("j", "a", "b")}</robot>'
+    path = tmp_path / "utf16.urdf"
+    path.write_bytes(
+        f'<?xml version="1.0" encoding="UTF-16"?>\n<!DOCTYPE robot [<!ENTITY x "t">]>{body}'.encode("utf-16")
+    )
+    with pytest.raises(URDFError, match="declares a DTD or XML entities"):
+        read_urdf(path)
+
+
+def test_a_one_line_urdf_reaches_the_engines_one_element_a_line(tmp_path, ar6_urdf):
+    """PyBullet reads a URDF in 8191-byte lines and cuts longer ones, names and numbers included."""
+    root = etree.parse(str(ar6_urdf), etree.XMLParser(remove_blank_text=True, remove_comments=True)).getroot()
+    for i in range(40):  # a long single line
+        root.append(etree.fromstring(f'<link name="extra_{i}"/>'))
+        root.append(
+            etree.fromstring(
+                f'<joint name="extra_j{i}" type="fixed"><parent link="tool0"/><child link="extra_{i}"/></joint>'
+            )
+        )
+    path = tmp_path / "one_line.urdf"
+    path.write_bytes(etree.tostring(root))
+    assert len(path.read_bytes()) > MAX_LINE_BYTES and b"\n" not in path.read_bytes()
+    resolved = read_urdf(path).resolved_xml
+    assert max(len(line) for line in resolved.split(b"\n")) < 200
+    long_name = "n" * MAX_LINE_BYTES
+    path.write_bytes(etree.tostring(root).replace(b'"extra_0"', f'"{long_name}"'.encode()))
+    with pytest.raises(URDFError, match=rf"over the {MAX_LINE_BYTES}-byte line PyBullet reads.*shorten"):
+        read_urdf(path)
 
 
 def test_names_too_long_to_look_up_are_urdf_errors(tmp_path):
@@ -240,6 +321,24 @@ def test_malformed_robots_say_what_is_missing(tmp_path, text, message):
     with pytest.raises(URDFError, match=message) as info:
         RobotModel(path)
     assert "KeyError" not in str(info.value) and "AttributeError" not in str(info.value)
+
+
+def test_a_floating_joint_off_the_chain_is_refused_before_an_engine_sees_it(tmp_path):
+    """MuJoCo refused it (a free joint below the root); PyBullet raised out of its mass matrix for a planar one."""
+    for kind in ("floating", "planar"):
+        body = ARM + f'<joint name="f" type="{kind}"><parent link="b"/><child link="d"/></joint>'
+        with pytest.raises(URDFError, match=rf"joint 'f' has type '{kind}'; armreach simulates a fixed-base arm"):
+            RobotModel(_write(tmp_path, body))
+
+
+def test_processing_instructions_and_comments_never_reach_the_engines(tmp_path, ar6_urdf):
+    """MuJoCo's XML reader took a processing instruction inside the robot for a malformed declaration."""
+    path = tmp_path / "arm.urdf"
+    path.write_text(
+        ar6_urdf.read_text().replace('<link name="world"/>', '<link name="world"><?fuzz x?><!--c--></link>')
+    )
+    resolved = read_urdf(path).resolved_xml
+    assert b"<?fuzz" not in resolved and b"<!--" not in resolved
 
 
 def test_a_cycle_of_mimic_joints_is_a_urdf_error(tmp_path):

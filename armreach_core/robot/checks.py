@@ -14,8 +14,16 @@ element, the attribute and the fix:
 * masses, inertias' principal moments, damping and friction are not negative, and an
   inertia tensor is positive semi-definite; geometry sizes are positive;
 * an ``<inertial>`` has both ``<mass>`` and ``<inertia>``; geometry has its sizes;
-* link and joint names are unique, joint types are URDF types, a ``<mimic>`` names another
+* link and joint names are unique, joint types are URDF types that the engines simulate
+  as URDF says (no ``floating`` or ``planar`` joint: armreach models a fixed-base arm), a
+  joint's ``<parent>`` and ``<child>`` name links of the URDF, a ``<mimic>`` names another
   joint of the URDF, and a URDF has at most :data:`MAX_LINKS` links.
+
+A zero mass, and an inertia that is positive semi-definite but singular (a zero principal
+moment: a point or a rod) or breaks the triangle inequality (one moment larger than the
+other two together), are accepted and repaired by the engines: MuJoCo raises masses and
+moments to its lower bounds (``boundmass``, ``boundinertia``) and balances the moments
+(``balanceinertia``); PyBullet takes them as they are.
 
 Extension blocks (``<gazebo>``, ``<transmission>``, ``<mujoco>``...) are not checked:
 no engine armreach drives reads them.
@@ -40,6 +48,9 @@ MAX_MAGNITUDE = 1e6
 MAX_LINKS = 1000
 #: Joint types the URDF format defines.
 URDF_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+#: Joint types armreach's engines load as the URDF means them. A floating or planar joint
+#: inside an arm is refused by MuJoCo's importer or left to PyBullet's own reading.
+SIMULATED_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
 
 _NUMBER = re.compile(r"^[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?$")
 _INERTIA = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
@@ -71,13 +82,17 @@ def _numbers(
     bound: float | None = MAX_MAGNITUDE,
     minimum: float | None = None,
     strictly: bool = False,
+    fix: str = "",
 ) -> list[float] | None:
-    """The ``count`` numbers of ``element``'s ``attribute``, checked; ``None`` when absent."""
+    """The ``count`` numbers of ``element``'s ``attribute``, checked; ``None`` when absent.
+
+    ``fix`` ends the message when a value is below ``minimum``.
+    """
     raw = element.get(attribute)
     where = f"{attribute}={raw!r} of {_where(element)}"
     if raw is None:
         if required:
-            raise URDFError(f"{_where(element)} has no {attribute}= attribute; the URDF format requires it")
+            raise URDFError(f"{_where(element)} has no {attribute}= attribute; the URDF format requires it: add it")
         return None
     parts = raw.split()
     if len(parts) != count or not all(_NUMBER.match(p) for p in parts):
@@ -91,7 +106,7 @@ def _numbers(
             raise URDFError(f"{where} is beyond ±{bound:g}; no robot needs such a value, check the units")
         if minimum is not None and (value <= minimum if strictly else value < minimum):
             relation = ">" if strictly else ">="
-            raise URDFError(f"{where} must be {relation} {minimum:g}")
+            raise URDFError(f"{where} must be {relation} {minimum:g}; {fix or 'correct the sign'}")
     return values
 
 
@@ -102,6 +117,10 @@ def _check_origin(parent: Element) -> None:
         _numbers(origin, "rpy", 3)
 
 
+#: The end of a message about a shape's size below zero.
+_SIZE_FIX = "a shape's sizes are lengths in metres, all positive"
+
+
 def _check_geometry(holder: Element) -> None:
     _check_origin(holder)
     geometry = holder.find("geometry")
@@ -109,18 +128,25 @@ def _check_geometry(holder: Element) -> None:
         raise URDFError(f"{_where(holder)} has no <geometry>; add one or remove the element")
     shapes = [child for child in geometry if isinstance(child.tag, str)]
     if len(shapes) != 1:
-        raise URDFError(f"<geometry> of {_where(holder)} must hold exactly one shape, found {len(shapes)}")
+        found = ", ".join(f"<{shape.tag}>" for shape in shapes) or "none"
+        raise URDFError(
+            f"<geometry> of {_where(holder)} must hold exactly one shape, found {len(shapes)} ({found}); keep one "
+            "box, cylinder, sphere or mesh, and give each further shape a <visual> or <collision> of its own"
+        )
     shape = shapes[0]
     if shape.tag == "box":
-        _numbers(shape, "size", 3, required=True, minimum=0.0, strictly=True)
+        _numbers(shape, "size", 3, required=True, minimum=0.0, strictly=True, fix=_SIZE_FIX)
     elif shape.tag in ("cylinder", "capsule"):
-        _numbers(shape, "radius", 1, required=True, minimum=0.0, strictly=True)
-        _numbers(shape, "length", 1, required=True, minimum=0.0, strictly=True)
+        _numbers(shape, "radius", 1, required=True, minimum=0.0, strictly=True, fix=_SIZE_FIX)
+        _numbers(shape, "length", 1, required=True, minimum=0.0, strictly=True, fix=_SIZE_FIX)
     elif shape.tag == "sphere":
-        _numbers(shape, "radius", 1, required=True, minimum=0.0, strictly=True)
+        _numbers(shape, "radius", 1, required=True, minimum=0.0, strictly=True, fix=_SIZE_FIX)
     elif shape.tag == "mesh":
         if not shape.get("filename"):
-            raise URDFError(f"<mesh> of {_where(holder)} has no filename= attribute")
+            raise URDFError(
+                f"<mesh> of {_where(holder)} has no filename= attribute; name the mesh file, such as "
+                'filename="package://my_arm/meshes/link.stl"'
+            )
         scale = _numbers(shape, "scale", 3)
         if scale is not None and any(s == 0.0 for s in scale):
             raise URDFError(f"scale={shape.get('scale')!r} of {_where(shape)} has a zero factor; use non-zero factors")
@@ -140,7 +166,7 @@ def _check_inertial(inertial: Element) -> None:
     if mass is None or inertia is None:
         missing = "<mass value=...>" if mass is None else "<inertia ixx=... izz=...>"
         raise URDFError(f"{_where(inertial)} has no {missing}; an <inertial> needs both <mass> and <inertia>")
-    _numbers(mass, "value", 1, required=True, minimum=0.0)
+    _numbers(mass, "value", 1, required=True, minimum=0.0, fix="a mass is never negative: give the link's mass in kg")
     values = {}
     for key in _INERTIA:
         number = _numbers(inertia, key, 1, required=True)
@@ -172,12 +198,22 @@ def _check_link(link: Element) -> None:
 
 def _check_joint(joint: Element) -> None:
     kind = joint.get("type")
+    if kind is None:
+        raise URDFError(f"{_where(joint)} has no type= attribute; give it one of {', '.join(URDF_JOINT_TYPES)}")
     if kind not in URDF_JOINT_TYPES:
         raise URDFError(f"{_where(joint)} has type {kind!r}; URDF joint types are {', '.join(URDF_JOINT_TYPES)}")
+    if kind not in SIMULATED_JOINT_TYPES:
+        raise URDFError(
+            f"{_where(joint)} has type {kind!r}; armreach simulates a fixed-base arm, with "
+            f"{', '.join(SIMULATED_JOINT_TYPES)} joints only: make it one of those (fixed, for a base or a part "
+            "bolted on)"
+        )
     for end in ("parent", "child"):
         found = joint.findall(end)
-        if len(found) != 1 or not found[0].get("link"):
-            raise URDFError(f"{_where(joint)} needs exactly one <{end} link=...>, found {len(found)}")
+        if len(found) != 1:
+            raise URDFError(f"{_where(joint)} needs exactly one <{end} link=...>, found {len(found)}; give it one")
+        if not found[0].get("link"):
+            raise URDFError(f"<{end}> of {_where(joint)} has no link= attribute; name the {end} link")
     _check_origin(joint)
     axis = joint.find("axis")
     if axis is not None:
@@ -194,8 +230,8 @@ def _check_joint(joint: Element) -> None:
             raise URDFError(f"<limit> of {_where(joint)} has lower {lower[0]} > upper {upper[0]}; swap them")
     dynamics = joint.find("dynamics")
     if dynamics is not None:
-        _numbers(dynamics, "damping", 1, bound=None, minimum=0.0)
-        _numbers(dynamics, "friction", 1, bound=None, minimum=0.0)
+        _numbers(dynamics, "damping", 1, bound=None, minimum=0.0, fix="use 0 for none")
+        _numbers(dynamics, "friction", 1, bound=None, minimum=0.0, fix="use 0 for none")
     mimic = joint.find("mimic")
     if mimic is not None:
         _numbers(mimic, "multiplier", 1)
@@ -237,10 +273,23 @@ def check_tree(root: Element) -> None:
             )
     _unique(links, "link")
     _unique(joints, "joint")
+    for material in root.findall("material"):  # shared materials, named by the visuals
+        color = material.find("color")
+        if color is not None:
+            _numbers(color, "rgba", 4)
     for link in links:
         _check_link(link)
     for joint in joints:
         _check_joint(joint)
+    link_names = {link.get("name") for link in links}
+    for joint in joints:
+        for end in ("parent", "child"):
+            name = joint.find(end).get("link")  # type: ignore[union-attr]  # checked by _check_joint
+            if name not in link_names:
+                raise URDFError(
+                    f"<{end} link={name!r}> of {_where(joint)} names no link of the URDF; fix the name, or add "
+                    f'<link name="{name}"/>'
+                )
     names = {joint.get("name") for joint in joints}
     for joint in joints:
         mimic = joint.find("mimic")

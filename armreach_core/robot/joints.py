@@ -101,7 +101,10 @@ def joint_spec(joint: Any) -> JointSpec:
         lower = finite(limit.lower, f"lower limit of joint {name!r}")
         upper = finite(limit.upper, f"upper limit of joint {name!r}")
         if not lower < upper:
-            raise URDFError(f"joint {name!r} has lower limit {lower} >= upper limit {upper}")
+            raise URDFError(
+                f"{kind} joint {name!r} has lower limit {lower} >= upper limit {upper}, so it cannot move; give it "
+                'a range (lower < upper), or make it type="fixed"'
+            )
     velocity = limit.velocity if limit is not None and limit.velocity is not None else None
     effort = limit.effort if limit is not None and limit.effort is not None else None
     damping = dynamics.damping if dynamics is not None and dynamics.damping is not None else 0.0

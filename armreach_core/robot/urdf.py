@@ -1,15 +1,19 @@
 """Safe reading of URDF files: no XML entities, resolved mesh paths, clear errors.
 
-Every URDF that armreach touches goes through :func:`read_urdf`. It refuses DTDs and
-entity declarations before any XML parser sees the file (so neither a billion-laughs
-bomb nor an external entity pointing at a local file is ever expanded), parses with an
-lxml parser that resolves nothing and reaches no network, and hands the checked text to
+Every URDF that armreach touches goes through :func:`read_urdf`. It refuses files over
+:data:`MAX_URDF_BYTES` before reading them, and DTDs and entity declarations before any XML
+parser sees the file (so neither a billion-laughs bomb nor an external entity pointing at
+a local file is ever expanded; a DTD in an encoding the byte scan cannot see, such as
+UTF-16, is refused once parsed), parses with an lxml parser that resolves nothing, reaches
+no network and drops comments and processing instructions, and hands the checked text to
 yourdfpy. Every link and joint is checked first (:mod:`armreach_core.robot.checks`:
 plain finite numbers, non-negative masses, valid inertias, unique names), so engines
 only ever see values they handle. Mesh references (``package://``, ``file://``,
 relative or absolute) are resolved to absolute paths here, once, so that every backend
 loads the same files; files outside the URDF's folder or ROS package are refused unless
-the user opts in (:func:`resolve_mesh_path`).
+the user opts in (:func:`resolve_mesh_path`). The text handed on is laid out one element
+per line: PyBullet's URDF reader cuts lines longer than :data:`MAX_LINE_BYTES`, which
+garbles a one-line (minified) URDF's names and numbers.
 """
 
 from __future__ import annotations
@@ -28,6 +32,9 @@ from armreach_core.robot.checks import check_tree
 
 #: Largest URDF file accepted, in bytes. Real robot descriptions are far smaller.
 MAX_URDF_BYTES = 16 * 1024 * 1024
+#: Longest line of the URDF text engines are given, in bytes. PyBullet reads a URDF through
+#: an 8192-byte line buffer and breaks longer lines, inside a name or a number if need be.
+MAX_LINE_BYTES = 8191
 #: Set to 1 to let URDFs use meshes outside their own folder or package (see :func:`resolve_mesh_path`).
 ALLOW_EXTERNAL_ENV = "ARMREACH_ALLOW_EXTERNAL_MESHES"
 #: Folders whose parent is taken as the package root of a URDF inside them (ROS layout).
@@ -51,8 +58,11 @@ def _safe_parser() -> etree.XMLParser:
         no_network=True,
         load_dtd=False,
         dtd_validation=False,
-        huge_tree=False,
+        # libxml2's own caps (a comment or a text over 10 MB) would refuse a file under
+        # MAX_URDF_BYTES, read in full already, as "not well-formed"; that size bounds them
+        huge_tree=True,
         remove_comments=True,
+        remove_pis=True,  # MuJoCo's XML reader takes a processing instruction for a malformed declaration
     )
 
 
@@ -150,6 +160,28 @@ def resolve_mesh_path(filename: str, urdf_dir: Path, *, allow_external: bool = F
     return found
 
 
+def _dtd_error(urdf_path: Path) -> URDFError:
+    return URDFError(
+        f"URDF file {str(urdf_path)!r} declares a DTD or XML entities, which armreach never expands "
+        "(they can read local files or explode in size); remove the <!DOCTYPE>/<!ENTITY> declarations"
+    )
+
+
+def _laid_out(root: etree._Element, urdf_path: Path) -> bytes:
+    """``root`` as UTF-8 text, one element per line, every line at most :data:`MAX_LINE_BYTES`."""
+    etree.indent(root, space=" ")  # only whitespace between elements changes
+    text = b'<?xml version="1.0" encoding="utf-8"?>\n' + etree.tostring(root, encoding="utf-8")
+    for line in text.split(b"\n"):
+        if len(line) > MAX_LINE_BYTES:
+            start = line.lstrip()[:60].decode("utf-8", "replace")
+            raise URDFError(
+                f"URDF file {str(urdf_path)!r}: an element is {len(line)} bytes long ({start!r}...), over the "
+                f"{MAX_LINE_BYTES}-byte line PyBullet reads, which would cut it in the middle of a name or a number; "
+                "shorten its attribute values (names, mesh paths)"
+            )
+    return text
+
+
 def read_urdf(path: str | os.PathLike[str], *, allow_external_meshes: bool | None = None) -> ParsedURDF:
     """Read and check a URDF file.
 
@@ -170,26 +202,39 @@ def read_urdf(path: str | os.PathLike[str], *, allow_external_meshes: bool | Non
     if not _is_file(urdf_path):
         raise URDFError(f"URDF file not found: {str(urdf_path)!r}; pass the path of an existing .urdf file")
     size = urdf_path.stat().st_size
+    too_big = (
+        f"over armreach's limit of {MAX_URDF_BYTES} bytes (MAX_URDF_BYTES); robot descriptions are far smaller: "
+        "check that this is the right file, and strip padding and long comments"
+    )
     if size > MAX_URDF_BYTES:
-        raise URDFError(
-            f"URDF file {str(urdf_path)!r} is {size} bytes, over the {MAX_URDF_BYTES}-byte limit; "
-            "is it really a robot description?"
-        )
+        raise URDFError(f"URDF file {str(urdf_path)!r} is {size} bytes, {too_big}")
     with open(urdf_path, "rb") as handle:  # at most the limit, even if the file grew since stat()
         data = handle.read(MAX_URDF_BYTES + 1)
     if len(data) > MAX_URDF_BYTES:
-        raise URDFError(f"URDF file {str(urdf_path)!r} grew past the {MAX_URDF_BYTES}-byte limit while being read")
+        raise URDFError(f"URDF file {str(urdf_path)!r} grew while being read, {too_big}")
     if _DTD_PATTERN.search(data):
-        raise URDFError(
-            f"URDF file {str(urdf_path)!r} declares a DTD or XML entities, which armreach never expands "
-            "(they can read local files or explode in size); remove the <!DOCTYPE>/<!ENTITY> declarations"
-        )
+        raise _dtd_error(urdf_path)
     try:
         root = etree.fromstring(data, parser=_safe_parser())
     except etree.XMLSyntaxError as exc:
-        raise URDFError(f"URDF file {str(urdf_path)!r} is not well-formed XML: {exc}") from None
+        raise URDFError(
+            f"URDF file {str(urdf_path)!r} is not well-formed XML: {exc}; fix the markup at that line and column "
+            "(a truncated file, a stray byte or an unclosed tag)"
+        ) from None
+    if root.getroottree().docinfo.internalDTD is not None:  # in an encoding the byte scan does not read (UTF-16)
+        raise _dtd_error(urdf_path)
     if not isinstance(root.tag, str) or etree.QName(root).localname != "robot":
-        raise URDFError(f"URDF file {str(urdf_path)!r} has root element <{root.tag}>, expected <robot>")
+        raise URDFError(
+            f"URDF file {str(urdf_path)!r} has root element <{root.tag}>, expected <robot>; is it a URDF? "
+            "(an SDF, MJCF or xacro file must be converted to URDF first)"
+        )
+    namespace = etree.QName(root).namespace
+    if namespace is not None:
+        raise URDFError(
+            f"URDF file {str(urdf_path)!r}: the <robot> element is in the XML namespace {namespace!r}, so none of "
+            "its elements is a URDF element; remove the xmlns= attribute (prefixed ones such as xmlns:xacro= "
+            "are fine)"
+        )
     if not root.get("name"):
         raise URDFError(
             f"URDF file {str(urdf_path)!r}: the <robot> element has no name= attribute; the URDF format requires "
@@ -212,7 +257,7 @@ def read_urdf(path: str | os.PathLike[str], *, allow_external_meshes: bool | Non
             found, _ = _find(filename, urdf_dir, allow_external_meshes, "texture")
             if found is not None:  # a missing texture only loses colour, as in every URDF viewer
                 texture.set("filename", str(found))
-    resolved = b'<?xml version="1.0" encoding="utf-8"?>\n' + etree.tostring(root, encoding="utf-8")
+    resolved = _laid_out(root, urdf_path)
     try:
         model = yourdfpy.URDF.load(
             io.BytesIO(resolved),
