@@ -45,8 +45,8 @@ VENV310 ?= .venv310
 test-py310:
 	@if [ -z "$(PY310)" ]; then echo "no python3.10 here: skipping the 3.10 run"; exit 0; fi; \
 	if [ ! -f $(VENV310)/.installed ] || [ pyproject.toml -nt $(VENV310)/.installed ]; then \
-		$(PY310) -m venv $(VENV310) && $(VENV310)/bin/python -m pip install --quiet --upgrade pip && \
-		$(VENV310)/bin/python -m pip install --quiet setuptools -e ".[dev]" -e backends/pybullet -e backends/mujoco \
+		$(PY310) -m venv $(VENV310) && $(VENV310)/bin/python -m pip install --quiet --upgrade pip setuptools && \
+		$(VENV310)/bin/python -m pip install --quiet -e ".[dev]" -e backends/pybullet -e backends/mujoco \
 			-e tasks/grasp && \
 		touch $(VENV310)/.installed; \
 	fi; \

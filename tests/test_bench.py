@@ -50,6 +50,7 @@ def test_bench_command_writes_json_and_table(tmp_path, capsys) -> None:
 
 
 def test_bench_rejects_bad_options(capsys) -> None:
+    pytest.importorskip("stable_baselines3", reason="the training throughput options need the rl extra")
     assert main(["bench", "--sb3", "a2c=5"]) == 2
     assert "expected ALGO=N" in capsys.readouterr().err
     assert main(["bench", "--learners", "sb3,keras"]) == 2

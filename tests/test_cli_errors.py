@@ -173,7 +173,13 @@ MATRIX = [
     ),
     # sweep
     case("sweep", "preset", ["sweep", "{spec_preset}"], PRESET, needs=("stable_baselines3",)),
-    case("sweep", "not-yaml", ["sweep", "{bad_yaml}"], r"sweep spec '.*bad\.yaml' is not valid YAML: .*line 1"),
+    case(
+        "sweep",
+        "not-yaml",
+        ["sweep", "{bad_yaml}"],
+        r"sweep spec '.*bad\.yaml' is not valid YAML: .*line 1",
+        needs=("stable_baselines3",),
+    ),
     case("sweep", "backend", ["sweep", "{spec_backend}"], BACKEND, needs=("stable_baselines3",)),
     case("sweep", "unknown-flag", ["sweep", "{spec_ok}", "--no-such-flag"], unknown_flag("sweep")),
     case("sweep", "bad-value", ["sweep", "{spec_ok}", "--cpus", "x"], bad_int("sweep", "--cpus")),
@@ -185,20 +191,16 @@ MATRIX = [
         needs=("stable_baselines3",),
     ),
     case("sweep", "missing-argument", ["sweep"], required("sweep", "spec")),
-    case("sweep", "missing-file", ["sweep", "{nowhere}.yaml"], r"sweep spec '.*nowhere\.yaml' does not exist"),
+    case(
+        "sweep",
+        "missing-file",
+        ["sweep", "{nowhere}.yaml"],
+        r"sweep spec '.*nowhere\.yaml' does not exist",
+        needs=("stable_baselines3",),
+    ),
     case("sweep", "missing-urdf", ["sweep", "{spec_missing}"], MISSING_URDF, needs=("stable_baselines3",)),
-    case(
-        "sweep",
-        "not-xml",
-        ["sweep", "{spec_text}"],
-        NOT_XML,
-    ),
-    case(
-        "sweep",
-        "not-robot",
-        ["sweep", "{spec_html}"],
-        NOT_ROBOT,
-    ),
+    case("sweep", "not-xml", ["sweep", "{spec_text}"], NOT_XML, needs=("stable_baselines3",)),
+    case("sweep", "not-robot", ["sweep", "{spec_html}"], NOT_ROBOT, needs=("stable_baselines3",)),
     case(
         "sweep",
         "out-is-file",
@@ -207,18 +209,8 @@ MATRIX = [
         needs=("stable_baselines3", "ray"),
     ),
     # tune
-    case(
-        "tune",
-        "preset",
-        ["tune", "--algo", "ppo", "--preset", "nosuch"],
-        PRESET,
-    ),
-    case(
-        "tune",
-        "backend",
-        ["tune", "--algo", "ppo", "--backend", "nosuch"],
-        BACKEND,
-    ),
+    case("tune", "preset", ["tune", "--algo", "ppo", "--preset", "nosuch"], PRESET, needs=("stable_baselines3",)),
+    case("tune", "backend", ["tune", "--algo", "ppo", "--backend", "nosuch"], BACKEND, needs=("stable_baselines3",)),
     case("tune", "unknown-flag", ["tune", "--algo", "ppo", "--no-such-flag"], unknown_flag("tune")),
     case("tune", "bad-value", ["tune", "--algo", "ppo", "--trials", "x"], bad_int("tune", "--trials")),
     case(
@@ -233,6 +225,7 @@ MATRIX = [
         "steps-below-report-every",
         ["tune", "--algo", "ppo", "--steps", "10"],
         r"--steps.*--report-every",
+        needs=("stable_baselines3",),
     ),
     case("tune", "missing-argument", ["tune"], required("tune", "--algo")),
     case(
@@ -242,18 +235,8 @@ MATRIX = [
         MISSING_URDF,
         needs=("stable_baselines3",),
     ),
-    case(
-        "tune",
-        "not-xml",
-        ["tune", "--algo", "ppo", "--urdf", "{text}"],
-        NOT_XML,
-    ),
-    case(
-        "tune",
-        "not-robot",
-        ["tune", "--algo", "ppo", "--urdf", "{html}"],
-        NOT_ROBOT,
-    ),
+    case("tune", "not-xml", ["tune", "--algo", "ppo", "--urdf", "{text}"], NOT_XML, needs=("stable_baselines3",)),
+    case("tune", "not-robot", ["tune", "--algo", "ppo", "--urdf", "{html}"], NOT_ROBOT, needs=("stable_baselines3",)),
     case(
         "tune",
         "out-is-file",

@@ -45,7 +45,8 @@ def test_gymnasium_check_env(task, backend_name):
 @pytest.mark.parametrize(("task", "backend_name"), TASK_BACKENDS)
 @pytest.mark.parametrize("goal_conditioned", [False, True])
 def test_sb3_check_env(task, backend_name, goal_conditioned):
-    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+    env_checker = pytest.importorskip("stable_baselines3.common.env_checker", reason="needs the rl extra")
+    sb3_check_env = env_checker.check_env
 
     spec = armreach_core.get_host().registry.tasks[task]
     env = gym.make(spec.env_id, backend=backend_name, goal_conditioned=goal_conditioned)

@@ -261,6 +261,7 @@ def test_installed_plugin_distribution_is_disabled_by_the_env_var(installed_toy)
 def test_a_task_plugin_ships_presets_found_by_name(tmp_path):
     """A preset a task plugin ships (TaskSpec.presets) is found by its name, as the grasp plugin's is;
     armreach's own presets keep their names."""
+    pytest.importorskip("stable_baselines3", reason="presets are the rl extra's")
     from armreach_core.errors import ConfigError
     from armreach_core.rl.presets import load_preset
 

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from armreach_core.cli.checks import check_out
+from armreach_core.cli.checks import check_out, check_urdf
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 
 
@@ -37,28 +37,30 @@ def run(args: argparse.Namespace) -> int:
     from armreach_core.errors import ConfigError
 
     check_out(args.out)
+    if args.steps < 10 or args.repeats < 1:
+        raise ConfigError("--steps must be >= 10 and --repeats >= 1")
     backends = args.backends or installed_backends()
     check_backends(backends)
-    from armreach_core.rl.learners import ALGORITHMS, LEARNERS
-
+    check_urdf(args.urdf)
     sb3: dict[str, int] = {}
-    algos = ALGORITHMS["sb3"]
-    if args.sb3 != "none":
+    learners: list[str] = []
+    measure_sb3 = None
+    if args.sb3 != "none":  # training throughput: the rl extra (its import says so when it is missing)
+        from armreach_core.rl.learners import ALGORITHMS, LEARNERS
+        from armreach_core.rl.throughput import bench_training
+
+        algos = ALGORITHMS["sb3"]
         for item in args.sb3.split(","):
             algo, _, n = item.partition("=")
             if algo not in algos or not n.isdigit():
                 raise ConfigError(f"--sb3 {args.sb3!r}: expected ALGO=N[,ALGO=N] with ALGO in {', '.join(algos)}")
             sb3[algo] = int(n)
-    learners = [name for name in args.learners.split(",") if name]
-    unknown = [name for name in learners if name not in LEARNERS]
-    if unknown or not learners:
-        raise ConfigError(f"--learners {args.learners!r}: use one or more of {', '.join(LEARNERS)}, comma-separated")
-    if args.steps < 10 or args.repeats < 1:
-        raise ConfigError("--steps must be >= 10 and --repeats >= 1")
-    measure_sb3 = None
-    if sb3:
-        from armreach_core.rl.throughput import bench_training  # needs the rl extra; says so when missing
-
+        learners = [name for name in args.learners.split(",") if name]
+        unknown = [name for name in learners if name not in LEARNERS]
+        if unknown or not learners:
+            raise ConfigError(
+                f"--learners {args.learners!r}: use one or more of {', '.join(LEARNERS)}, comma-separated"
+            )
         measure_sb3 = bench_training
     results = run_bench(
         backends,

@@ -20,7 +20,17 @@ from gymnasium.utils.env_checker import check_env
 import armreach_core
 
 HERE = Path(__file__).resolve().parents[1]
-BACKENDS = [b for b in armreach_core.available_backends() if b in ("pybullet", "mujoco")]
+
+
+def _installed(name: str) -> bool:
+    try:
+        armreach_core.env.load_backend_class(name)
+    except armreach_core.BackendUnavailableError:
+        return False
+    return True
+
+
+BACKENDS = [name for name in armreach_core.available_backends() if _installed(name)]
 
 
 @pytest.fixture(scope="module")
