@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.checks import check_backends as check_installed
 from armreach_core.cli.checks import check_out, check_urdf
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 
@@ -40,7 +41,8 @@ def run(args: argparse.Namespace) -> int:
     if args.steps < 10 or args.repeats < 1:
         raise ConfigError("--steps must be >= 10 and --repeats >= 1")
     backends = args.backends or installed_backends()
-    check_backends(backends)
+    check_backends(backends)  # at least one
+    check_installed(backends)  # and each one's engine imports
     check_urdf(args.urdf)
     sb3: dict[str, int] = {}
     learners: list[str] = []
