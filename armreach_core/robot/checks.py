@@ -52,7 +52,10 @@ URDF_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", 
 #: inside an arm is refused by MuJoCo's importer or left to PyBullet's own reading.
 SIMULATED_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
 
-_NUMBER = re.compile(r"^[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?$")
+# ASCII digits and whitespace only: Python's float() and str.split() also take other scripts'
+# digits (１, ٣) and spaces (U+00A0), which no engine reads as numbers or separators
+_NUMBER = re.compile(r"^[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$")
+_SPACES = re.compile(r"[ \t\n\r]+")
 _INERTIA = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 
 Element = etree._Element
@@ -94,7 +97,7 @@ def _numbers(
         if required:
             raise URDFError(f"{_where(element)} has no {attribute}= attribute; the URDF format requires it: add it")
         return None
-    parts = raw.split()
+    parts = _SPACES.split(raw.strip(" \t\n\r")) if raw.strip(" \t\n\r") else []
     if len(parts) != count or not all(_NUMBER.match(p) for p in parts):
         kind = "a number" if count == 1 else f"{count} numbers separated by spaces"
         raise URDFError(f"{where} is not {kind}; write plain decimals such as 0.5 or 2e-3 (no nan, inf or commas)")
