@@ -1,11 +1,21 @@
 """Builds envs from URDF files on request, in a process of its own (see tests/test_fuzz_urdf.py).
 
-Reads one JSON request per line on stdin, ``{"path": ..., "backends": [...], "steps": N}``,
-and answers one JSON line per request on the stdout it was started with:
-``{"outcome": "ok" | "urdf_error" | "error", "detail": ...}``. ``ok`` means that every
-backend built the env and that reset and ``steps`` random-action steps gave finite
-observations and rewards. Warnings are errors, as under pytest. A segmentation fault or
-a hang ends or stalls this process, which the test sees from outside.
+Reads one JSON request per line on stdin,
+``{"path": ..., "backends": [...], "steps": N, "allow_external_meshes": bool}``, and answers
+one JSON line per request on the stdout it was started with:
+
+* ``{"outcome": "ok", "detail": "mujoco,pybullet"}``: the robot model built, and every
+  backend built the env, whose reset and ``steps`` random-action steps gave finite
+  observations and rewards;
+* ``{"outcome": "refused", "error": "URDFError", "stage": "model" | backend, "detail": message}``:
+  armreach refused the file on purpose (a ``URDFError`` or a ``ConfigError``);
+* ``{"outcome": "error", "detail": ...}``: anything else (another exception, with its
+  traceback, or a non-finite value).
+
+Warnings are errors, as under pytest. A segmentation fault or a hang ends or stalls this
+process, which the test sees from outside. The reach task's reachability map is drawn from
+:data:`MAP_SAMPLES` poses instead of its 120 000: the map's precision is not under test here,
+and it is most of the time an env takes to build.
 """
 
 from __future__ import annotations
@@ -15,6 +25,10 @@ import os
 import sys
 import traceback
 import warnings
+from typing import Any
+
+#: Poses the reachability map of each robot is drawn from: one batch (the map draws 20 000 at a time).
+MAP_SAMPLES = 20_000
 
 
 def _hide_modules() -> None:
@@ -23,22 +37,28 @@ def _hide_modules() -> None:
             sys.modules[name.strip()] = None  # type: ignore[assignment]
 
 
-def _build(path: str, backends: list[str], steps: int) -> dict[str, str]:
+def _refused(stage: str, exc: Exception) -> dict[str, str]:
+    return {"outcome": "refused", "error": type(exc).__name__, "stage": stage, "detail": str(exc)}
+
+
+def _build(request: dict[str, Any]) -> dict[str, str]:
     import numpy as np
 
-    from armreach_core import ArmReach6DOFEnv, URDFError
+    from armreach_core import ArmReach6DOFEnv, ConfigError, URDFError
     from armreach_core.robot.model import RobotModel
 
+    path, steps = request["path"], int(request["steps"])
+    allow = bool(request.get("allow_external_meshes", False))
     try:
-        RobotModel(path)
-    except URDFError as exc:
-        return {"outcome": "urdf_error", "detail": f"model: {exc}"}
+        RobotModel(path, allow_external_meshes=allow)
+    except (URDFError, ConfigError) as exc:
+        return _refused("model", exc)
     built = []
-    for backend in backends:
+    for backend in request["backends"]:
         try:
-            env = ArmReach6DOFEnv(backend=backend, urdf=path)
-        except URDFError as exc:
-            return {"outcome": "urdf_error", "detail": f"{backend}: {exc}"}
+            env = ArmReach6DOFEnv(backend=backend, urdf=path, allow_external_meshes=allow)
+        except (URDFError, ConfigError) as exc:
+            return _refused(backend, exc)
         try:
             rng = np.random.default_rng(0)
             obs, _ = env.reset(seed=0)
@@ -65,13 +85,17 @@ def main() -> None:
     protocol = os.fdopen(os.dup(1), "w", encoding="utf-8")
     os.dup2(2, 1)  # whatever the engines print goes to stderr, not into the answers
     import armreach_core  # noqa: F401 - load the plugins once, before the first request
+    from armreach_core.robot import workspace
+
+    assert workspace.ReachabilityMap.__init__.__defaults__ == (workspace.VOXEL, workspace.SAMPLES)
+    workspace.ReachabilityMap.__init__.__defaults__ = (workspace.VOXEL, MAP_SAMPLES)
 
     protocol.write(json.dumps({"outcome": "ready"}) + "\n")
     protocol.flush()
     for line in sys.stdin:
         request = json.loads(line)
         try:
-            answer = _build(request["path"], request["backends"], int(request["steps"]))
+            answer = _build(request)
         except Exception:
             answer = {"outcome": "error", "detail": traceback.format_exc(limit=6)}
         protocol.write(json.dumps(answer) + "\n")
