@@ -346,10 +346,11 @@ def _sane_number(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
 
 @st.composite
 def _axis(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
-    """A joint's axis scaled by a positive factor: the same direction, not a unit vector."""
+    """A joint's axis set to its direction times a length from 1e-3 to 1e3: not a unit vector."""
     axis = draw(st.sampled_from([axis for axis in _elements(root, "axis") if axis.get("xyz")]))
-    factor = draw(st.sampled_from([1e-3, 0.5, 2.0, 7.0, 1e3]))
-    axis.set("xyz", " ".join(f"{float(x) * factor:g}" for x in axis.get("xyz", "").split()))
+    xyz = [float(x) for x in axis.get("xyz", "").split()]
+    length = draw(st.sampled_from([1e-3, 0.5, 2.0, 7.0, 1e3])) / math.hypot(*xyz)
+    axis.set("xyz", " ".join(f"{x * length:.9g}" for x in xyz))
     return Change("axis scaled", f"joint {_owner(axis)} axis {axis.get('xyz')!r}")
 
 
@@ -825,7 +826,7 @@ def _joint_values(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
         axis = joint.find("axis")
         if axis is None:
             axis = etree.SubElement(joint, "axis")
-        axis.set("xyz", draw(st.sampled_from(["0 0 0", "0 -0 0", "0.0 0e3 -0"])))
+        axis.set("xyz", draw(st.sampled_from(["0 0 0", "0 -0 0", "0.0 0e3 -0", "0 0 1e-9", "1e-6 -1e-6 0"])))
         return _refuse("joint values", f"{kind} of {joint.get('name')}", rf"of joint {name} has no direction")
     if kind == "mimic of nothing":
         etree.SubElement(joint, "mimic", joint="no_such_joint")

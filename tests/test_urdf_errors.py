@@ -161,6 +161,7 @@ UPPER_ARM_INERTIA = 'ixx="0.132451" ixy="0" ixz="0" iyy="0.132451" iyz="0" izz="
         ('damping="0.5"', 'damping="-1"', r"damping='-1' of <dynamics> of joint 'shoulder_pan_joint' must be >= 0"),
         ('lower="-6.283185"', 'lower="-1e30"', r"lower='-1e30' of <limit>.*beyond"),
         ('<axis xyz="0 0 1"/>', '<axis xyz="0 0 0"/>', "has no direction"),
+        ('<axis xyz="0 0 1"/>', '<axis xyz="0 0 1e-7"/>', r"has no direction \(its length 1e-07 is under 1e-05"),
         ('<axis xyz="0 0 1"/>', "<axis/>", r"<axis> of joint 'shoulder_pan_joint' has no xyz= attribute"),
         ('type="revolute"', 'type="hinge"', "type 'hinge'; URDF joint types are"),
         ("</robot>", '<link name="tool0"/></robot>', "link name 'tool0' is used twice"),

@@ -46,6 +46,8 @@ from armreach_core.errors import URDFError
 MAX_MAGNITUDE = 1e6
 #: Most links a URDF may have (engines build every link; real arms have tens).
 MAX_LINKS = 1000
+#: Shortest joint axis accepted (its direction is what counts; MuJoCo refuses axes under 1e-6).
+MIN_AXIS_LENGTH = 1e-5
 #: Joint types the URDF format defines.
 URDF_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 #: Joint types armreach's engines load as the URDF means them. A floating or planar joint
@@ -221,8 +223,12 @@ def _check_joint(joint: Element) -> None:
     axis = joint.find("axis")
     if axis is not None:
         xyz = _numbers(axis, "xyz", 3, required=True)  # the format requires it; leave <axis> out for 1 0 0
-        if xyz is not None and kind not in ("fixed", "floating") and not any(xyz):
-            raise URDFError(f"<axis xyz='0 0 0'> of {_where(joint)} has no direction; give the joint's unit axis")
+        length = math.hypot(*xyz) if xyz is not None else 1.0
+        if kind != "fixed" and length < MIN_AXIS_LENGTH:
+            raise URDFError(
+                f"<axis xyz={axis.get('xyz')!r}> of {_where(joint)} has no direction (its length {length:.3g} is "
+                f'under {MIN_AXIS_LENGTH:g}, which MuJoCo refuses); give the joint\'s unit axis, such as xyz="0 0 1"'
+            )
     limit = joint.find("limit")
     if limit is not None:
         lower = _numbers(limit, "lower", 1)
