@@ -374,6 +374,8 @@ def _delete_optional(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
         for path, attribute in OPTIONAL
         for element in owner.findall(path)
         if attribute is None or element.get(attribute) is not None
+        # PyBullet refuses a <dynamics> with neither attribute: see _joint_values
+        if not (element.tag == "dynamics" and attribute and len(element.attrib) == 1)
     ]
     element, attribute = draw(st.sampled_from(found))
     path = root.getroottree().getpath(element)
@@ -802,8 +804,9 @@ def _geometry(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
 
 @st.composite
 def _joint_values(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
-    """A joint's range empty or reversed, its axis zero, or a <mimic> of no other joint."""
-    kind = draw(st.sampled_from(["reversed range", "empty range", "zero axis", "mimic of nothing", "mimic of itself"]))
+    """A joint's range empty or reversed, its axis zero, a <mimic> of no other joint, or an empty <dynamics>."""
+    kinds = ["reversed range", "empty range", "zero axis", "mimic of nothing", "mimic of itself", "empty dynamics"]
+    kind = draw(st.sampled_from(kinds))
     limited = [j for j in _joints_of_type(root, "revolute", "prismatic") if j.find("limit") is not None]
     if kind in ("reversed range", "empty range"):
         joint = draw(st.sampled_from(limited))
@@ -828,6 +831,11 @@ def _joint_values(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
             axis = etree.SubElement(joint, "axis")
         axis.set("xyz", draw(st.sampled_from(["0 0 0", "0 -0 0", "0.0 0e3 -0", "0 0 1e-9", "1e-6 -1e-6 0"])))
         return _refuse("joint values", f"{kind} of {joint.get('name')}", rf"of joint {name} has no direction")
+    if kind == "empty dynamics":
+        for dynamics in joint.findall("dynamics"):
+            joint.remove(dynamics)
+        etree.SubElement(joint, "dynamics")
+        return _refuse("joint values", f"{kind} of {joint.get('name')}", rf"<dynamics> of joint {name} has neither")
     if kind == "mimic of nothing":
         etree.SubElement(joint, "mimic", joint="no_such_joint")
         return _refuse("joint values", kind, rf"<mimic joint='no_such_joint'> of joint {name} names no joint")

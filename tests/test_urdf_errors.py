@@ -158,6 +158,11 @@ UPPER_ARM_INERTIA = 'ixx="0.132451" ixy="0" ixz="0" iyy="0.132451" iyz="0" izz="
         # Python's float() reads other scripts' digits and str.split() other spaces; MuJoCo reads neither
         ('<origin xyz="0 0 0.28" rpy="0 0 0"/>', '<origin xyz="0 0 ０.28" rpy="0 0 0"/>', "not 3 numbers"),
         ('<origin xyz="0 0 0.28" rpy="0 0 0"/>', '<origin xyz="0\u00a00 0.28" rpy="0 0 0"/>', "not 3 numbers"),
+        (
+            '<dynamics damping="0.5" friction="0.0"/>',
+            "<dynamics/>",
+            r"<dynamics> of joint 'shoulder_pan_joint' has neither",
+        ),
         ('damping="0.5"', 'damping="-1"', r"damping='-1' of <dynamics> of joint 'shoulder_pan_joint' must be >= 0"),
         ('lower="-6.283185"', 'lower="-1e30"', r"lower='-1e30' of <limit>.*beyond"),
         ('<axis xyz="0 0 1"/>', '<axis xyz="0 0 0"/>', "has no direction"),

@@ -12,8 +12,10 @@ element, the attribute and the fix:
 * numbers are plain decimals (``-1.5``, ``2e-3``), as many as the attribute needs,
   finite, and at most :data:`MAX_MAGNITUDE` in size (metres, kilograms, radians);
 * masses, inertias' principal moments, damping and friction are not negative, and an
-  inertia tensor is positive semi-definite; geometry sizes are positive;
-* an ``<inertial>`` has both ``<mass>`` and ``<inertia>``; geometry has its sizes;
+  inertia tensor is positive semi-definite; geometry sizes are positive; a movable joint's
+  axis has a direction;
+* an ``<inertial>`` has both ``<mass>`` and ``<inertia>``; geometry has its sizes; a
+  ``<dynamics>`` has damping or friction;
 * link and joint names are unique, joint types are URDF types that the engines simulate
   as URDF says (no ``floating`` or ``planar`` joint: armreach models a fixed-base arm), a
   joint's ``<parent>`` and ``<child>`` name links of the URDF, a ``<mimic>`` names another
@@ -239,6 +241,11 @@ def _check_joint(joint: Element) -> None:
             raise URDFError(f"<limit> of {_where(joint)} has lower {lower[0]} > upper {upper[0]}; swap them")
     dynamics = joint.find("dynamics")
     if dynamics is not None:
+        if dynamics.get("damping") is None and dynamics.get("friction") is None:
+            raise URDFError(
+                f"<dynamics> of {_where(joint)} has neither damping= nor friction=, which PyBullet's reader refuses; "
+                "give one (0 for none) or remove the element"
+            )
         _numbers(dynamics, "damping", 1, bound=None, minimum=0.0, fix="use 0 for none")
         _numbers(dynamics, "friction", 1, bound=None, minimum=0.0, fix="use 0 for none")
     mimic = joint.find("mimic")
