@@ -13,9 +13,10 @@ random steps. Every mutation class declares what it must give:
 Must build (:data:`BUILD`, :data:`LAYOUTS`): numbers that leave the arm's shape alone set to
 values a small arm may have, spelled in every way the checks take; axes scaled; optional
 parts deleted; a joint made another movable type or fixed; unknown elements and attributes;
-children reordered; comments and processing instructions; fixed links hung anywhere; meshes
-inside the robot's folder; meshes outside it when the caller opts in; the text on one line,
-indented, in CRLF, UTF-16, Latin-1, with a BOM, without a declaration, padded with comments.
+children reordered; comments and processing instructions; fixed links hung anywhere (up to
+the 128 links PyBullet serves); meshes inside the robot's folder; meshes outside it when the
+caller opts in; the text on one line, indented, in CRLF, UTF-16, Latin-1, with a BOM,
+without a declaration, padded with comments.
 
 Must be refused (:data:`REFUSED`, :data:`DAMAGES`): numbers that are no plain decimal,
 overflow a double, exceed the checks' bound, or come in the wrong count; negative, NaN or
@@ -81,6 +82,9 @@ TIME_BOUND = 60.0
 STEPS = 3
 SOURCE = asset_path("ar6", "ar6.urdf").read_bytes()
 COUNTS: collections.Counter[str] = collections.Counter()
+#: Most links of a body whose joints PyBullet reads back (getJointState fails on every joint of a
+#: body with 128 joints or more); armreach's own limit is MAX_LINKS.
+PYBULLET_LINKS = 128
 #: A 1x1 PNG image.
 PIXEL_PNG = "iVBORw0KGgoAAAANSUhEUgAAAAEAAAABCAYAAAAfFcSJAAAADUlEQVR42mNk+M9QDwADhgGAWjR9awAAAABJRU5ErkJggg=="
 #: A tetrahedron every engine reads.
@@ -456,11 +460,14 @@ def _comments(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
 
 @st.composite
 def _extra_links(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
-    """Bare links on fixed joints (a comb, or a chain) hung from any link."""
-    count = draw(st.integers(1, 60))
+    """Bare links on fixed joints (a comb, or a chain) hung from any link, up to PyBullet's
+    :data:`PYBULLET_LINKS` (see test_a_robot_of_more_links_than_pybullet_serves_builds)."""
+    start = len(root.findall("link"))
+    if start >= PYBULLET_LINKS:
+        return Change("extra links", f"none: {start} links already")
+    count = draw(st.integers(1, min(60, PYBULLET_LINKS - start)))
     shape = draw(st.sampled_from(["comb", "chain"]))
     parent = hung = draw(st.sampled_from(_links(root)))
-    start = len(root.findall("link"))
     for i in range(start, start + count):
         root.append(etree.Element("link", name=f"fuzz_{i}"))
         joint = etree.SubElement(root, "joint", name=f"fuzz_j{i}", type="fixed")
@@ -1063,6 +1070,26 @@ def test_a_one_line_urdf_longer_than_pybullet_reads_a_line_builds(worker, place)
 @given(data=st.data())
 def test_a_mutated_urdf_builds_or_is_refused_as_declared_many(worker, place, data):
     _check(worker, place, data.draw(mutated_urdfs(place)))
+
+
+@pytest.mark.skipif("pybullet" not in BACKENDS, reason="PyBullet is not installed")
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="PyBullet reads back no joint of a body with 128 joints or more (getJointState fails); armreach "
+    "accepts up to MAX_LINKS links, and PyBullet's backend does not refuse more than PyBullet serves",
+)
+def test_a_robot_of_more_links_than_pybullet_serves_builds(worker, place):
+    """ar6 and 120 bare links on fixed joints: 129 links, 128 joints. MuJoCo builds it."""
+    root = etree.fromstring(SOURCE)
+    for i in range(PYBULLET_LINKS - len(root.findall("link")) + 1):
+        root.append(etree.Element("link", name=f"extra_{i}"))
+        joint = etree.SubElement(root, "joint", name=f"extra_j{i}", type="fixed")
+        etree.SubElement(joint, "parent", link="world")
+        etree.SubElement(joint, "child", link=f"extra_{i}")
+    path = place.robot / "many-links.urdf"
+    path.write_bytes(etree.tostring(root))
+    judge(None, worker.build(path))
 
 
 @pytest.mark.skipif("pybullet" not in BACKENDS, reason="PyBullet is not installed")
