@@ -504,13 +504,20 @@ NOT_DECIMALS = ["nan", "NaN", "inf", "-inf", "Infinity", "abc", "", "1e", "0x10"
                 "∞", "1e-3.5", "0.0.1", "１", "٣", "0\u00a00", "e5", "0b1", "1e+"]  # fmt: skip
 
 
+def _set_one_number(
+    draw: st.DrawFn, root: etree._Element, value: st.SearchStrategy[str], keys: set[tuple[str, str]] = NUMERIC_KEYS
+) -> tuple[etree._Element, str, str]:
+    """One number of one numeric attribute replaced by a drawn text: (element, attribute, note)."""
+    element, attribute = draw(st.sampled_from(_numbers(root, keys)))
+    parts = element.get(attribute, "").split()
+    parts[draw(st.integers(0, len(parts) - 1))] = draw(value)
+    element.set(attribute, " ".join(parts))
+    return element, attribute, f"{root.getroottree().getpath(element)}@{attribute}={element.get(attribute)!r}"
+
+
 @st.composite
 def _not_a_decimal(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
-    element, attribute = draw(st.sampled_from(_numbers(root)))
-    parts = element.get(attribute, "").split()
-    parts[draw(st.integers(0, len(parts) - 1))] = draw(st.sampled_from(NOT_DECIMALS))
-    element.set(attribute, " ".join(parts))
-    note = f"{root.getroottree().getpath(element)}@{attribute}={element.get(attribute)!r}"
+    element, attribute, note = _set_one_number(draw, root, st.sampled_from(NOT_DECIMALS))
     return _refuse(
         "not a decimal", note, rf"{attribute}=.* of <{element.tag}>", r"is not (a number|\d numbers)", "plain decimals"
     )
@@ -518,22 +525,14 @@ def _not_a_decimal(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
 
 @st.composite
 def _overflow(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
-    element, attribute = draw(st.sampled_from(_numbers(root)))
-    parts = element.get(attribute, "").split()
-    parts[draw(st.integers(0, len(parts) - 1))] = draw(st.sampled_from(["1e309", "-1e309", "2e308", "-1e400"]))
-    element.set(attribute, " ".join(parts))
-    note = f"{root.getroottree().getpath(element)}@{attribute}={element.get(attribute)!r}"
+    element, attribute, note = _set_one_number(draw, root, st.sampled_from(["1e309", "-1e309", "2e308", "-1e400"]))
     return _refuse("overflow", note, rf"{attribute}=.* of <{element.tag}>", "overflows a double; use a finite value")
 
 
 @st.composite
 def _beyond(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
-    element, attribute = draw(st.sampled_from(_numbers(root, NUMERIC_KEYS - UNBOUNDED)))
-    parts = element.get(attribute, "").split()
-    value = draw(st.floats(MAX_MAGNITUDE, 1e300, exclude_min=True)) * draw(st.sampled_from([1, -1]))
-    parts[draw(st.integers(0, len(parts) - 1))] = repr(value)
-    element.set(attribute, " ".join(parts))
-    note = f"{root.getroottree().getpath(element)}@{attribute}={element.get(attribute)!r}"
+    big = st.floats(MAX_MAGNITUDE, 1e300, exclude_min=True).flatmap(lambda v: st.sampled_from([repr(v), repr(-v)]))
+    element, attribute, note = _set_one_number(draw, root, big, NUMERIC_KEYS - UNBOUNDED)
     return _refuse(
         "beyond the bound", note, rf"{attribute}=.* of <{element.tag}>", r"beyond ±1e\+06", "check the units"
     )
