@@ -137,14 +137,16 @@ class ArmKinematics:
             if joint.child in child_to_joint:
                 raise URDFError(
                     f"link {joint.child!r} is the child of two joints "
-                    f"({child_to_joint[joint.child].name!r}, {joint.name!r}); a URDF must be a tree"
+                    f"({child_to_joint[joint.child].name!r}, {joint.name!r}); a URDF must be a tree: keep one "
+                    "of the two joints, or give the other its own child link"
                 )
             child_to_joint[joint.child] = joint
         roots = [name for name in self.link_names if name not in child_to_joint]
         if len(roots) != 1:
             raise URDFError(
                 f"URDF {str(self.urdf_path)!r} must have exactly one root link, found "
-                f"{', '.join(repr(r) for r in roots) + ' (links no joint connects)' if roots else 'none (a cycle)'}"
+                f"{', '.join(repr(r) for r in roots) + ' (links no joint connects)' if roots else 'none (a cycle)'}; "
+                "join every link to the tree by a joint and remove the links that belong to no arm"
             )
         self.root_link: str = roots[0]
         if not any(joint.type in MOVABLE_TYPES for joint in robot.joints):
