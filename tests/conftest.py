@@ -21,6 +21,7 @@ from pathlib import Path
 import pytest
 
 import armreach_core
+from armreach_core.diagnostics.installed import installed_backends
 from armreach_core.robot.bundled import asset_path
 
 
@@ -45,19 +46,7 @@ def xarm_urdf() -> Path:
     return data / "xarm" / "xarm6_robot.urdf"
 
 
-def installed_backends() -> list[str]:
-    """Registered backends whose engine imports."""
-    names = []
-    for name in armreach_core.available_backends():
-        try:
-            armreach_core.env.load_backend_class(name)
-        except armreach_core.BackendUnavailableError:
-            continue
-        names.append(name)
-    return names
-
-
-BACKENDS = installed_backends()
+BACKENDS = installed_backends()  # registered backends whose engine imports
 TASK_BACKENDS = [(task, backend) for task in armreach_core.available_tasks() for backend in BACKENDS]
 
 

@@ -18,19 +18,10 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import armreach_core
+from armreach_core.diagnostics.installed import installed_backends
 
 HERE = Path(__file__).resolve().parents[1]
-
-
-def _installed(name: str) -> bool:
-    try:
-        armreach_core.env.load_backend_class(name)
-    except armreach_core.BackendUnavailableError:
-        return False
-    return True
-
-
-BACKENDS = [name for name in armreach_core.available_backends() if _installed(name)]
+BACKENDS = installed_backends()  # registered backends whose engine imports
 
 
 @pytest.fixture(scope="module")
