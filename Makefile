@@ -40,7 +40,10 @@ test-no-mujoco: $(STAMP)
 # The env, its checks and the plugins on the oldest Python armreach supports (3.10), where one
 # is installed: core, backends and grasp, no training stack (the CPU torch wheel is 3.11's).
 # PyPI's MuJoCo for 3.10 is an older release, so MuJoCo is hidden as in test-no-mujoco.
-PY310 ?= $(shell command -v python3.10 2>/dev/null || ls $$(pyenv root 2>/dev/null)/versions/3.10*/bin/python3.10 2>/dev/null | tail -1)
+# pyenv's shim answers `command -v python3.10` even where 3.10 is not the selected version, so
+# each candidate is asked to run before it is taken.
+PY310 ?= $(firstword $(foreach p,$(wildcard $(shell pyenv root 2>/dev/null)/versions/3.10*/bin/python3.10) \
+	$(shell command -v python3.10 2>/dev/null),$(shell $(p) -c 'print("$(p)")' 2>/dev/null)))
 VENV310 ?= .venv310
 test-py310:
 	@if [ -z "$(PY310)" ]; then echo "no python3.10 here: skipping the 3.10 run"; exit 0; fi; \
@@ -48,7 +51,7 @@ test-py310:
 		$(PY310) -m venv $(VENV310) && $(VENV310)/bin/python -m pip install --quiet --upgrade pip setuptools && \
 		$(VENV310)/bin/python -m pip install --quiet -e ".[dev]" -e backends/pybullet -e backends/mujoco \
 			-e tasks/grasp && \
-		touch $(VENV310)/.installed; \
+		touch $(VENV310)/.installed || exit 1; \
 	fi; \
 	ARMREACH_TEST_HIDE=mujoco $(VENV310)/bin/python -m pytest -m "not slow and not training" -q -p no:cacheprovider
 
