@@ -58,6 +58,14 @@ def add_parser(sub: Any) -> None:
     )
     parser.add_argument("--steps", type=int, default=None, help="total env steps (default: the preset's)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    parser.add_argument(
+        "--until-success",
+        type=float,
+        default=None,
+        metavar="RATE",
+        help="stop at the first held-out evaluation with at least this success rate (0: train to --steps; "
+        "default: the preset's, 0.95 for fast)",
+    )
     parser.add_argument("--n-envs", type=int, default=None, help="parallel envs (default: the preset's, or 1)")
     add_robot_arguments(parser)
     parser.add_argument(
@@ -84,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
         if conflicting:
             raise ConfigError(
                 f"--resume continues {run_dir} with the settings in its config.yaml; drop {', '.join(conflicting)} "
-                "(only --steps, --threads and --device may change)"
+                "(only --steps, --until-success, --threads and --device may change)"
             )
         config = runs.read_config(run_dir)
         if args.steps is not None:
@@ -95,6 +103,8 @@ def run(args: argparse.Namespace) -> int:
             config = config.with_settings(torch_threads=args.threads)
         if args.device != "auto":
             config = dataclasses.replace(config, device=args.device)
+        if args.until_success is not None:
+            config = with_until_success(config, args.until_success)
         print(f"resuming {run_dir} towards {config.timesteps} steps")
         result = train(config, run_dir, resume=True, stream=sys.stderr, command=args.command_line, trust=args.trust)
     else:
@@ -114,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
             placement={key: getattr(args, key) for key in ("home", "base_position", "base_orientation")},
             learner=args.learner,
         )
+        if args.until_success is not None:
+            config = with_until_success(config, args.until_success)
         # before the run folder is made: a failing command leaves none behind
         check_backends([config.backend])
         check_urdf(config.urdf)
@@ -139,6 +151,16 @@ def run(args: argparse.Namespace) -> int:
     from armreach_core.rl.evaluate import table
 
     rate = result.timesteps / result.seconds if result.seconds > 0 else float("nan")
+    stopped = []
+    if result.passed is not None:
+        passed = result.passed
+        stopped = [
+            (
+                "stopped",
+                f"{100 * passed.success_rate:.0f} % success on {passed.episodes} held-out targets "
+                f"at {result.timesteps:,} steps",
+            )
+        ]
     print(
         table(
             [
@@ -146,12 +168,25 @@ def run(args: argparse.Namespace) -> int:
                 ("algorithm", f"{config.algo} ({config.preset} preset) on {config.backend}, seed {config.seed}"),
                 ("env steps", f"{result.timesteps:,} of {result.total:,}"),
                 ("wall time", f"{result.seconds / 60:.1f} min ({rate:,.0f} env steps/s)"),
+                *stopped,
                 ("model", str(run_dir / runs.MODEL)),
                 ("next", f"armreach evaluate {run_dir}"),
             ]
         )
     )
     return 0
+
+
+def with_until_success(config: Any, rate: float) -> Any:
+    """``config`` stopping at a held-out success ``rate`` (0: at its step budget), the preset's other
+    ``until_success`` settings kept."""
+    if not config.learns:
+        raise ConfigError(f"--until-success stops training, and {config.algo!r} is not trained; drop it")
+    if not 0.0 <= rate <= 1.0:
+        raise ConfigError(f"--until-success must be a success rate in [0, 1], got {rate}")
+    section = dict(config.settings.get("until_success") or {})
+    section["threshold"] = rate
+    return config.with_settings(until_success=section)
 
 
 def check_device(device: str) -> None:

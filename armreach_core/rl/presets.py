@@ -171,6 +171,13 @@ HER_SCHEMA: dict[str, Check] = {
     "n_sampled_goal": _num(int, 1),
     "goal_selection_strategy": _choice("future", "final", "episode"),
 }
+UNTIL_SUCCESS_SCHEMA: dict[str, Check] = {
+    "threshold": _num(float, 0.0, 1.0),
+    "episodes": _num(int, 1),
+    "every": _num(int, 1),
+    "seed": _num(int, 0),
+    "gate": _num(float, 0.0, 1.0),
+}
 COMMON: dict[str, Check] = {
     "timesteps": _num(int, 1),
     "n_envs": _num(int, 1, 64),
@@ -181,6 +188,8 @@ COMMON: dict[str, Check] = {
     "gamma": _num(float, 0.0, 1.0),
     "batch_size": _num(int, 1),
     "checkpoint_every": _num(int, 1),
+    # stop at the first held-out evaluation at or above a success rate (armreach_core.rl.validation)
+    "until_success": _section(UNTIL_SUCCESS_SCHEMA),
     # the library that trains (armreach_core.rl.learners)
     "learner": _choice(*LEARNERS),
 }

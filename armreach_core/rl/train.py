@@ -23,6 +23,8 @@ from armreach_core.rl.checkpoints import read_progress, save_checkpoint
 from armreach_core.rl.config import RunConfig
 from armreach_core.rl.learners import algo_class, configure_xla
 from armreach_core.rl.presets import RL_ALGOS
+from armreach_core.rl.timing import RolloutTimer, TimedVecEnv, split, write_timing
+from armreach_core.rl.validation import StopOnSuccessCallback, UntilSuccess, Validation
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
@@ -40,6 +42,8 @@ class TrainResult:
     interrupted: bool
     #: Wall-clock of this call.
     seconds: float
+    #: The held-out evaluation that stopped training early (preset ``until_success``), if one did.
+    passed: Validation | None = None
 
 
 def _load_checkpoint(config: RunConfig, run_dir: Path, env: Any, trust: bool) -> BaseAlgorithm:
@@ -110,6 +114,18 @@ def _demonstrate(config: RunConfig, model: Any, run_dir: Path) -> None:
     runs.write_json(run_dir / runs.DEMONSTRATIONS, {"episodes": episodes, "steps": steps, "success_rate": success})
 
 
+def _until_success(config: RunConfig, run_dir: Path, train_seconds: Any) -> StopOnSuccessCallback | None:
+    """The callback that stops training at its first passed held-out evaluation, if the preset asks for one."""
+    spec = UntilSuccess.from_settings(config.settings)
+    if spec is None:
+        return None
+    from armreach_core.env import ArmEnv
+    from armreach_core.rl.agents import env_kwargs
+
+    kwargs = env_kwargs(config, evaluation=True)
+    return StopOnSuccessCallback(spec, lambda: ArmEnv(**kwargs), run_dir, train_seconds)
+
+
 def train(
     config: RunConfig,
     run_dir: Path,
@@ -149,7 +165,9 @@ def train(
     else:
         runs.new_run_dir(run_dir)
     configure_threads(config.torch_threads, config.device)
-    env = make_vec_env(config, run_dir, seed_base(config.seed), config.n_envs, append=resume)
+    call_start = time.perf_counter()
+    env = TimedVecEnv(make_vec_env(config, run_dir, seed_base(config.seed), config.n_envs, append=resume))
+    rollouts = RolloutTimer()
     try:
         if resume:
             model = _load_checkpoint(config, run_dir, env, trust)
@@ -171,13 +189,17 @@ def train(
         def train_seconds() -> float:
             return base_seconds + time.perf_counter() - t0
 
+        until: StopOnSuccessCallback | None = None
         with signals.installed():
             rows: dict[str, int] | None = None
             if remaining > 0:
                 checkpoints = AtomicCheckpointCallback(
                     run_dir, config.checkpoint_every, train_seconds=train_seconds, guard=signals.protect
                 )
-                own: list[BaseCallback] = [StopOnSignalCallback(signals), checkpoints]
+                own: list[BaseCallback] = [StopOnSignalCallback(signals), checkpoints, rollouts]
+                until = _until_success(config, run_dir, train_seconds)
+                if until is not None:
+                    own.append(until)
                 if stream is not None:
                     success = SuccessRateCallback()
                     own += [success, TqdmProgressBarCallback(stream, success)]
@@ -202,6 +224,10 @@ def train(
                 if not signals.requested:
                     runs.atomic_save(run_dir / runs.MODEL, model.save)
         seconds = time.perf_counter() - t0
-        return TrainResult(run_dir, int(model.num_timesteps), config.timesteps, signals.requested, seconds)
+        passed = until.passed if until is not None else None
+        validation = until.seconds if until is not None else 0.0
+        parts = split(time.perf_counter() - call_start, env.seconds, rollouts.rollouts, rollouts.between, validation)
+        write_timing(run_dir, parts, int(model.num_timesteps))
+        return TrainResult(run_dir, int(model.num_timesteps), config.timesteps, signals.requested, seconds, passed)
     finally:
         env.close()

@@ -1,0 +1,195 @@
+"""Stopping when training has succeeded: held-out evaluations during training.
+
+A preset's ``until_success`` section (or ``armreach train --until-success RATE``) makes
+training evaluate its policy, every ``every`` env steps, on ``episodes`` episodes of the
+paper's task (the 2048-step limit and the 5 cm threshold that ``armreach evaluate`` uses),
+and stop at the first evaluation whose success rate is at least ``threshold``, like SB3's
+``StopTrainingOnRewardThreshold`` but on success and on targets training never drew.
+
+Held out: episode ``i`` is reset with ``seed + i`` (default 50,000 on), a block apart from
+training's seeds and from ``armreach evaluate``'s (10,000 on), so the final evaluation
+judges a policy that was not chosen on its own targets.
+
+Cheap enough to run often:
+
+* an evaluation stops at the failure that makes the threshold unreachable (with 50
+  episodes at 0.95, the third), so a policy that cannot pass yet costs a few episodes;
+* it runs only once the success rate of the last 100 training episodes is within ``gate``
+  of the threshold (training episodes are shorter, so they under-estimate it).
+
+Every evaluation is a row of ``validation.csv`` in the run folder.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from stable_baselines3.common.callbacks import BaseCallback
+
+from armreach_core.errors import ConfigError
+
+#: The run-folder file that holds one row per evaluation.
+VALIDATION = "validation.csv"
+#: Its columns.
+COLUMNS = ("timesteps", "train_seconds", "episodes", "successes", "success_rate", "passed", "seconds")
+
+
+@dataclass(frozen=True)
+class UntilSuccess:
+    """When to evaluate and when to stop (preset section ``until_success``)."""
+
+    threshold: float = 0.95
+    episodes: int = 50
+    every: int = 4096
+    seed: int = 50_000
+    #: Evaluate once the training success rate is at least ``threshold - gate``.
+    gate: float = 0.1
+
+    @classmethod
+    def from_settings(cls, settings: Mapping[str, Any]) -> UntilSuccess | None:
+        """The section of validated preset ``settings``; None when absent or its threshold is 0."""
+        section = settings.get("until_success")
+        if not section:
+            return None
+        spec = cls(**section)
+        return spec if spec.threshold > 0 else None
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.threshold <= 1.0:
+            raise ConfigError(f"until_success.threshold must be in [0, 1], got {self.threshold}")
+        if self.episodes < 1 or self.every < 1:
+            raise ConfigError("until_success.episodes and until_success.every must be >= 1")
+
+    @property
+    def allowed_failures(self) -> int:
+        """Failures an evaluation may have and still pass."""
+        return math.floor((1.0 - self.threshold) * self.episodes + 1e-9)
+
+
+@dataclass(frozen=True)
+class Validation:
+    """One evaluation: how many episodes ran, how many succeeded, whether it passed."""
+
+    episodes: int
+    successes: int
+    passed: bool
+    seconds: float
+
+    @property
+    def success_rate(self) -> float:
+        return self.successes / self.episodes if self.episodes else float("nan")
+
+
+def validate(policy: Callable[[Any], Any], env: Any, spec: UntilSuccess) -> Validation:
+    """Run ``policy`` (observation -> action) on ``env`` for up to ``spec.episodes`` seeded
+    episodes, stopping at the failure that decides the outcome."""
+    t0 = time.perf_counter()
+    failures = successes = 0
+    for i in range(spec.episodes):
+        obs, _ = env.reset(seed=spec.seed + i)
+        while True:
+            obs, _, terminated, truncated, info = env.step(policy(obs))
+            if terminated or truncated:
+                break
+        if info["is_success"]:
+            successes += 1
+        else:
+            failures += 1
+            if failures > spec.allowed_failures:
+                break
+    ran = successes + failures
+    return Validation(ran, successes, failures <= spec.allowed_failures, time.perf_counter() - t0)
+
+
+class StopOnSuccessCallback(BaseCallback):
+    """Evaluates the policy on held-out targets as training goes and stops training at the first pass.
+
+    ``make_env`` builds the evaluation env (the paper's task) on first use; ``train_seconds``
+    gives the run's training time for the rows of ``validation.csv`` in ``run_dir``.
+    """
+
+    def __init__(
+        self,
+        spec: UntilSuccess,
+        make_env: Callable[[], Any],
+        run_dir: Path,
+        train_seconds: Callable[[], float],
+    ) -> None:
+        super().__init__()
+        self.spec = spec
+        self.make_env = make_env
+        self.path = run_dir / VALIDATION
+        self.train_seconds = train_seconds
+        self.env: Any = None
+        self.last = 0
+        #: The evaluation that stopped training, if one did.
+        self.passed: Validation | None = None
+        #: Seconds spent evaluating.
+        self.seconds = 0.0
+
+    def _on_training_start(self) -> None:
+        self.last = int(self.model.num_timesteps)
+
+    def _on_step(self) -> bool:
+        steps = int(self.model.num_timesteps)
+        if steps - self.last < self.spec.every or not self._gate_open():
+            return True
+        self.last = steps
+        if self.env is None:
+            self.env = self.make_env()
+        model = self.model
+
+        def policy(obs: Any) -> Any:
+            return model.predict(obs, deterministic=True)[0]
+
+        result = validate(policy, self.env, self.spec)
+        self.seconds += result.seconds
+        self._record(steps, result)
+        if result.passed:
+            self.passed = result
+            return False
+        return True
+
+    def _gate_open(self) -> bool:
+        buffer = getattr(self.model, "ep_success_buffer", None)
+        if not buffer:
+            return False
+        return bool(sum(buffer) / len(buffer) >= self.spec.threshold - self.spec.gate)
+
+    def _record(self, steps: int, result: Validation) -> None:
+        new = not self.path.is_file()
+        with open(self.path, "a", newline="", encoding="utf-8") as handle:
+            writer = csv.writer(handle)
+            if new:
+                writer.writerow(COLUMNS)
+            writer.writerow(
+                [
+                    steps,
+                    f"{self.train_seconds():.3f}",
+                    result.episodes,
+                    result.successes,
+                    f"{result.success_rate:.4f}",
+                    int(result.passed),
+                    f"{result.seconds:.3f}",
+                ]
+            )
+
+    def _on_training_end(self) -> None:
+        if self.env is not None:
+            self.env.close()
+            self.env = None
+
+
+def read_validations(run_dir: Path) -> list[dict[str, float]]:
+    """The rows of a run's ``validation.csv`` as numbers (none when it has no such file)."""
+    path = run_dir / VALIDATION
+    if not path.is_file():
+        return []
+    with open(path, newline="", encoding="utf-8") as handle:
+        return [{key: float(value) for key, value in row.items()} for row in csv.DictReader(handle)]

@@ -1,0 +1,115 @@
+"""Training that stops when it has succeeded: held-out evaluations, the stop, and where the time went."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from armreach_core.cli import main  # noqa: E402
+from armreach_core.env import ArmEnv  # noqa: E402
+from armreach_core.errors import ConfigError  # noqa: E402
+from armreach_core.rl.agents import IKAgent  # noqa: E402
+from armreach_core.rl.presets import validate_settings  # noqa: E402
+from armreach_core.rl.timing import PARTS, read_timing  # noqa: E402
+from armreach_core.rl.validation import UntilSuccess, read_validations, validate  # noqa: E402
+
+
+def test_a_controller_that_reaches_passes_on_every_held_out_target() -> None:
+    env = ArmEnv(backend="pybullet")
+    agent = IKAgent()
+    spec = UntilSuccess(threshold=0.95, episodes=10)
+    try:
+        result = validate(lambda obs: agent.act(obs, env), env, spec)
+    finally:
+        env.close()
+    assert result.passed and result.episodes == 10 and result.successes >= 10 - spec.allowed_failures
+
+
+def test_a_controller_that_never_reaches_is_decided_at_the_failure_that_makes_the_rate_unreachable() -> None:
+    env = ArmEnv(backend="pybullet", max_episode_steps=40)
+    hold = np.zeros(env.action_space.shape, dtype=np.float32)
+    spec = UntilSuccess(threshold=0.9, episodes=20)  # two failures allowed
+    try:
+        result = validate(lambda obs: hold, env, spec)
+    finally:
+        env.close()
+    assert spec.allowed_failures == 2
+    assert (result.episodes, result.successes, result.passed) == (3, 0, False)
+
+
+@pytest.mark.parametrize(
+    ("section", "problem"),
+    [({"threshold": 1.5}, "threshold"), ({"episodes": 0}, "episodes"), ({"often": 3}, "unknown key")],
+)
+def test_a_bad_until_success_section_is_refused_naming_the_key(section: dict[str, Any], problem: str) -> None:
+    with pytest.raises(ConfigError, match=problem):
+        validate_settings("ppo", {"until_success": section}, "fast.reach.ppo")
+
+
+def test_the_fast_presets_stop_at_95_percent_held_out_success() -> None:
+    from armreach_core.rl.presets import load_preset
+
+    preset = load_preset("fast")
+    for algo in preset.algos("reach"):
+        spec = UntilSuccess.from_settings(preset.get("reach", algo))
+        assert spec is not None and spec.threshold == 0.95, algo
+
+
+def _run(argv: list[str]) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(argv)
+    return code, out.getvalue(), err.getvalue()
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--preset", "fast", "--until-success", "1.5"], "success rate in"),
+        (["--preset", "paper", "--algo", "ik", "--until-success", "0.9"], "not trained"),
+    ],
+)
+def test_a_bad_until_success_flag_exits_2_before_any_folder(tmp_path: Path, flags: list[str], message: str) -> None:
+    code, _, err = _run(["train", *flags, "--out", str(tmp_path / "run")])
+    assert code == 2 and message in err and "Traceback" not in err
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_run_records_where_its_time_went(trained_run: Callable[..., Any]) -> None:
+    run = trained_run("--algo", "ppo", "--seed", "3", "--until-success", "0.9")
+    timing = read_timing(run.path)
+    assert timing["timesteps"] == 256
+    assert all(timing[part] >= 0 for part in PARTS) and timing["env"] > 0 and timing["learner"] > 0
+    assert sum(timing[part] for part in PARTS) == pytest.approx(timing["total"], abs=0.01)
+    # 256 steps never open the gate (training success far below 0.8): no evaluation, the whole budget
+    assert read_validations(run.path) == [] and "stopped" not in run.stdout
+
+
+@pytest.mark.slow
+@pytest.mark.training
+def test_the_fast_preset_stops_at_its_first_passed_evaluation_and_holds_on_the_final_one(tmp_path: Path) -> None:
+    run_dir = tmp_path / "run"
+    code, out, err = _run(["train", "--preset", "fast", "--out", str(run_dir)])
+    assert code == 0, err
+    rows = read_validations(run_dir)
+    assert rows and rows[-1]["passed"] == 1 and all(row["passed"] == 0 for row in rows[:-1])
+    assert rows[-1]["success_rate"] >= 0.95
+    progress = json.loads((run_dir / "checkpoint.json").read_text())
+    assert progress["timesteps"] == rows[-1]["timesteps"] < 196_608
+    assert "stopped" in out
+    # the final evaluation, on targets the stop rule never saw
+    evaluation = tmp_path / "eval"
+    code, _, err = _run(["evaluate", str(run_dir), "--episodes", "100", "--out", str(evaluation)])
+    assert code == 0, err
+    assert json.loads((evaluation / "summary.json").read_text())["success_rate"] >= 0.93
+    shutil.rmtree(run_dir)
