@@ -15,13 +15,13 @@ import pytest
 
 pytest.importorskip("stable_baselines3")
 
-from armreach_core.cli import main  # noqa: E402
-from armreach_core.env import ArmEnv  # noqa: E402
-from armreach_core.errors import ConfigError  # noqa: E402
-from armreach_core.rl.agents import IKAgent  # noqa: E402
-from armreach_core.rl.presets import validate_settings  # noqa: E402
-from armreach_core.rl.timing import PARTS, read_timing  # noqa: E402
-from armreach_core.rl.validation import UntilSuccess, read_validations, validate  # noqa: E402
+from armreach_core.cli import main
+from armreach_core.env import ArmEnv
+from armreach_core.errors import ConfigError
+from armreach_core.rl.agents import IKAgent
+from armreach_core.rl.presets import validate_settings
+from armreach_core.rl.timing import PARTS, read_timing
+from armreach_core.rl.validation import UntilSuccess, read_validations, validate
 
 
 def test_a_controller_that_reaches_passes_on_every_held_out_target() -> None:

@@ -28,6 +28,16 @@ def add_parser(sub: Any) -> None:
         help="learners whose training speed is measured, side by side (default: %(default)s)",
     )
     parser.add_argument("--out", type=Path, default=None, help="write bench.json and bench.md into this folder")
+    learning = parser.add_argument_group("learning speed (--learning)")
+    learning.add_argument(
+        "--learning",
+        action="store_true",
+        help="time each algorithm of a preset to its held-out success threshold, over seeds, "
+        "instead of the engine benchmarks (writes learning.json and learning.md)",
+    )
+    learning.add_argument("--preset", default="fast", help="preset whose algorithms are timed (default: fast)")
+    learning.add_argument("--algos", default=None, help="comma-separated algorithms (default: the preset's)")
+    learning.add_argument("--seeds", type=int, default=3, help="seeds per algorithm and backend (default: 3)")
     add_robot_arguments(parser)
     parser.set_defaults(run=run)
 
@@ -38,6 +48,8 @@ def run(args: argparse.Namespace) -> int:
     from armreach_core.errors import ConfigError
 
     check_out(args.out)
+    if args.learning:
+        return run_learning(args)
     if args.steps < 10 or args.repeats < 1:
         raise ConfigError("--steps must be >= 10 and --repeats >= 1")
     backends = args.backends or installed_backends()
@@ -78,4 +90,38 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         saved = save(results, args.out)
         print(f"saved {saved[0]} and {saved[1]}")
+    return 0
+
+
+def run_learning(args: argparse.Namespace) -> int:
+    """``--learning``: the preset's algorithms, each trained to its threshold over ``--seeds`` seeds."""
+    from armreach_core.diagnostics.installed import installed_backends
+    from armreach_core.errors import ConfigError
+    from armreach_core.rl.learning_bench import bench_learning, summarize, to_markdown
+    from armreach_core.rl.presets import load_preset
+    from armreach_core.rl.validation import UntilSuccess
+
+    if args.seeds < 1:
+        raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
+    if args.out is None:
+        raise ConfigError("--learning keeps its runs: give --out FOLDER")
+    if args.urdf is not None:
+        raise ConfigError("--learning times the preset on its own arm; drop --urdf")
+    preset = load_preset(args.preset)
+    have = preset.algos("reach")
+    algos = args.algos.split(",") if args.algos else have
+    unknown = [a for a in algos if a not in have]
+    if unknown:
+        raise ConfigError(f"--algos: preset {args.preset!r} has no {', '.join(unknown)}; it has {', '.join(have)}")
+    missing = [a for a in algos if UntilSuccess.from_settings(preset.get("reach", a)) is None]
+    if missing:
+        raise ConfigError(
+            f"preset {args.preset!r} does not stop at a success rate for {', '.join(missing)}: "
+            "add an until_success section to time it"
+        )
+    backends = args.backends or installed_backends()
+    check_installed(backends)
+    results = bench_learning(algos, backends, args.seeds, args.out, preset=args.preset)
+    print(to_markdown(summarize(results)))
+    print(f"saved {args.out / 'learning.json'} and {args.out / 'learning.md'}")
     return 0

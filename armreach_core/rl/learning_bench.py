@@ -1,0 +1,194 @@
+"""How fast the shipped presets learn: wall-clock and env steps to held-out success, per algorithm.
+
+``armreach bench --learning`` runs ``armreach train --preset fast --algo A --seed S`` as a
+command of its own for each algorithm, backend and seed, and times it from start to end
+(imports, env creation and JIT compilation included), as a user would. Training stops at
+its first held-out evaluation at or above the preset's ``until_success`` threshold (the
+paper's task: 5 cm within 2,048 steps; :mod:`armreach_core.rl.validation`). Each run is
+then evaluated on 100 further episodes whose targets the stop rule never saw.
+
+Per algorithm and backend: how many seeds reached the threshold, the interquartile mean
+(with its bootstrap interval, :mod:`armreach_core.rl.stats`) of the command's wall-clock
+and of the env steps, the final evaluation's success, and where the time went
+(:mod:`armreach_core.rl.timing`; ``start`` is the command's own start-up: imports and
+argument checks).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import TextIO
+
+from armreach_core.diagnostics.tables import markdown_table
+from armreach_core.errors import ConfigError
+from armreach_core.rl.stats import iqm_interval
+from armreach_core.rl.timing import PARTS, read_timing
+from armreach_core.rl.validation import read_validations
+
+#: Episodes of the final evaluation of each run.
+FINAL_EPISODES = 100
+
+
+@dataclass(frozen=True)
+class LearningRun:
+    """One training command and its outcome."""
+
+    backend: str
+    algo: str
+    seed: int
+    #: Wall-clock of the whole ``armreach train`` command.
+    seconds: float
+    timesteps: int
+    #: Whether a held-out evaluation passed (training stopped early).
+    reached: bool
+    #: Success on :data:`FINAL_EPISODES` further held-out episodes.
+    final_success: float
+    #: Seconds per part of the ``train`` call, plus ``start`` (the command's start-up).
+    parts: dict[str, float]
+
+
+def train_command(preset: str, algo: str, backend: str, seed: int, out: Path) -> list[str]:
+    return [
+        sys.executable,
+        "-m",
+        "armreach_core.cli",
+        "train",
+        "--preset",
+        preset,
+        "--algo",
+        algo,
+        "--backend",
+        backend,
+        "--seed",
+        str(seed),
+        "--out",
+        str(out),
+    ]
+
+
+def run_one(preset: str, algo: str, backend: str, seed: int, out: Path) -> LearningRun:
+    """Train one seed as its own command, then evaluate it."""
+    from armreach_core.rl.evaluate import evaluate_run
+
+    t0 = time.perf_counter()
+    done = subprocess.run(train_command(preset, algo, backend, seed, out), capture_output=True, text=True, check=False)
+    seconds = time.perf_counter() - t0
+    if done.returncode != 0:
+        raise ConfigError(f"`armreach train` failed for {algo} on {backend}, seed {seed}: {done.stderr.strip()[-500:]}")
+    rows = read_validations(out)
+    timing = read_timing(out)
+    parts = {part: timing.get(part, 0.0) for part in PARTS}
+    parts["start"] = max(seconds - timing.get("total", seconds), 0.0)
+    evaluation = evaluate_run(out, episodes=FINAL_EPISODES)
+    final = evaluation.summary()["success_rate"]
+    return LearningRun(
+        backend,
+        algo,
+        seed,
+        seconds,
+        int(timing.get("timesteps", 0)),
+        bool(rows and rows[-1]["passed"] == 1),
+        float(final),
+        parts,
+    )
+
+
+def bench_learning(
+    algos: Sequence[str],
+    backends: Sequence[str],
+    seeds: int,
+    out: Path,
+    *,
+    preset: str = "fast",
+    stream: TextIO | None = sys.stderr,
+) -> list[LearningRun]:
+    """Every (backend, algo, seed) in turn; the runs stay in ``out/runs/`` and the results in ``out``."""
+    results: list[LearningRun] = []
+    for backend in backends:
+        for algo in algos:
+            for seed in range(seeds):
+                run = run_one(preset, algo, backend, seed, out / "runs" / f"{algo}-{backend}-s{seed}")
+                results.append(run)
+                if stream is not None:
+                    state = "reached" if run.reached else "not reached"
+                    print(
+                        f"{algo} on {backend}, seed {seed}: {state} after {run.timesteps:,} steps, "
+                        f"{run.seconds:.1f} s; final {100 * run.final_success:.0f} %",
+                        file=stream,
+                    )
+    save(results, out, preset)
+    return results
+
+
+def summarize(results: Sequence[LearningRun]) -> list[dict[str, object]]:
+    """One row per (backend, algo): seeds reached, IQMs with intervals, final success, time shares."""
+    rows: list[dict[str, object]] = []
+    keys = sorted({(r.backend, r.algo) for r in results}, key=lambda k: (k[0], k[1]))
+    for backend, algo in keys:
+        runs = [r for r in results if (r.backend, r.algo) == (backend, algo)]
+        reached = [r for r in runs if r.reached]
+        total = sum(r.seconds for r in runs)
+        shares = {part: sum(r.parts.get(part, 0.0) for r in runs) / total for part in (*PARTS, "start")}
+        rows.append(
+            {
+                "backend": backend,
+                "algo": algo,
+                "seeds": len(runs),
+                "reached": len(reached),
+                "seconds": asdict(iqm_interval([r.seconds if r.reached else math.nan for r in runs])),
+                "timesteps": asdict(iqm_interval([r.timesteps if r.reached else math.nan for r in runs])),
+                "final_success": asdict(iqm_interval([r.final_success for r in runs])),
+                "shares": shares,
+            }
+        )
+    return rows
+
+
+def to_markdown(rows: Sequence[dict[str, object]]) -> str:
+    def interval(value: object, scale: float = 1.0, digits: int = 0) -> str:
+        assert isinstance(value, dict)
+        if math.isnan(value["estimate"]):
+            return "n/a"
+        text = f"{value['estimate'] * scale:,.{digits}f}"
+        if value["n"] > 1:
+            text += f" [{value['low'] * scale:,.{digits}f}, {value['high'] * scale:,.{digits}f}]"
+        return text
+
+    def shares(value: object) -> str:
+        assert isinstance(value, dict)
+        names = {"env": "env", "rollout_other": "policy", "validation": "eval", "learner": "learner"}
+        shown = [f"{names[k]} {100 * value[k]:.0f}" for k in names]
+        rest = value["setup"] + value["start"]
+        return " / ".join([*shown, f"start {100 * rest:.0f}"]) + " %"
+
+    header = ["backend", "algorithm", "reached", "wall-clock to 95 % (s)", "env steps", "final success", "time"]
+    body = [
+        [
+            str(row["backend"]),
+            str(row["algo"]),
+            f"{row['reached']}/{row['seeds']}",
+            interval(row["seconds"], digits=1),
+            interval(row["timesteps"]),
+            interval(row["final_success"], 100.0) + " %",
+            shares(row["shares"]),
+        ]
+        for row in rows
+    ]
+    return markdown_table(header, body)
+
+
+def save(results: Sequence[LearningRun], out: Path, preset: str) -> tuple[Path, Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    rows = summarize(results)
+    data = {"preset": preset, "runs": [asdict(r) for r in results], "summary": rows}
+    json_path, md_path = out / "learning.json", out / "learning.md"
+    json_path.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    md_path.write_text(to_markdown(rows) + "\n", encoding="utf-8")
+    return json_path, md_path
