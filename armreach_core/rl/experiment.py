@@ -28,6 +28,7 @@ from armreach_core.rl.monitor import episode_rewards, load_monitors
 from armreach_core.rl.monitor import training_progress as training_progress  # where it was first defined
 from armreach_core.rl.stats import Interval, iqm_interval
 from armreach_core.rl.train import train
+from armreach_core.rl.validation import read_validations
 
 #: The paper's numbers (Tables 2-4): PPO and DDPG, 614,400 steps, 100 evaluation episodes.
 PAPER = {
@@ -59,7 +60,10 @@ class ContenderResult:
     jerk_traces: list[npt.NDArray[np.float64]] = field(default_factory=list)
     run_dirs: list[Path] = field(default_factory=list)
     train_seconds: list[float] = field(default_factory=list)
+    #: Env steps each seed trained.
     timesteps: list[int] = field(default_factory=list)
+    #: Whether each seed stopped at a passed held-out evaluation (preset ``until_success``).
+    stopped: list[bool] = field(default_factory=list)
     control_dt: float = 1.0 / 24.0
 
     def convergence(self) -> MeanStd:
@@ -208,7 +212,8 @@ def run_experiment(
             result.summaries.append(summary)
             result.jerk_traces.append(evaluation.jerk_trace)
             result.control_dt = evaluation.control_dt
-            result.timesteps.append(runs.read_config(run_dir).timesteps)
+            result.timesteps.append(int(read_progress(run_dir).get("timesteps") or runs.read_config(run_dir).timesteps))
+            result.stopped.append(bool((rows := read_validations(run_dir)) and rows[-1]["passed"] == 1))
         results.append(result)
     ik_dir = runs.new_run_dir(out / "ik")  # nothing to train: always written afresh
     ik_config = resolve_config(
