@@ -56,10 +56,11 @@ def test_a_bad_until_success_section_is_refused_naming_the_key(section: dict[str
         validate_settings("ppo", {"until_success": section}, "fast.reach.ppo")
 
 
-def test_the_fast_presets_stop_at_95_percent_held_out_success() -> None:
+@pytest.mark.parametrize("name", ["fast", "any-arm"])
+def test_the_fast_and_any_arm_presets_stop_at_95_percent_held_out_success(name: str) -> None:
     from armreach_core.rl.presets import load_preset
 
-    preset = load_preset("fast")
+    preset = load_preset(name)
     for algo in preset.algos("reach"):
         spec = UntilSuccess.from_settings(preset.get("reach", algo))
         assert spec is not None and spec.threshold == 0.95, algo
