@@ -29,22 +29,26 @@ def test_a_controller_that_reaches_passes_on_every_held_out_target() -> None:
     agent = IKAgent()
     spec = UntilSuccess(threshold=0.95, episodes=10)
     try:
-        result = validate(lambda obs: agent.act(obs, env), env, spec)
+        result = validate(lambda batch: np.stack([agent.act(batch[0], env)]), [env], spec)
     finally:
         env.close()
     assert result.passed and result.episodes == 10 and result.successes >= 10 - spec.allowed_failures
 
 
-def test_a_controller_that_never_reaches_is_decided_at_the_failure_that_makes_the_rate_unreachable() -> None:
-    env = ArmEnv(backend="pybullet", max_episode_steps=40)
-    hold = np.zeros(env.action_space.shape, dtype=np.float32)
+@pytest.mark.parametrize("batch", [1, 4])
+def test_a_controller_that_never_reaches_is_decided_at_the_failure_that_makes_the_rate_unreachable(
+    batch: int,
+) -> None:
+    envs = [ArmEnv(backend="pybullet", max_episode_steps=40) for _ in range(batch)]
     spec = UntilSuccess(threshold=0.9, episodes=20)  # two failures allowed
     try:
-        result = validate(lambda obs: hold, env, spec)
+        result = validate(lambda obs: np.zeros((len(obs), *envs[0].action_space.shape), np.float32), envs, spec)
     finally:
-        env.close()
+        for env in envs:
+            env.close()
     assert spec.allowed_failures == 2
-    assert (result.episodes, result.successes, result.passed) == (3, 0, False)
+    # one env stops at the third failure; four side by side finish the four episodes they started
+    assert (result.episodes, result.successes, result.passed) == ((3, 0, False) if batch == 1 else (4, 0, False))
 
 
 @pytest.mark.parametrize(

@@ -12,6 +12,7 @@ judges a policy that was not chosen on its own targets.
 
 Cheap enough to run often:
 
+* its episodes run :data:`BATCH` at a time, one batched policy call per step for all of them;
 * an evaluation stops at the failure that makes the threshold unreachable (with 50
   episodes at 0.95, the third), so a policy that cannot pass yet costs a few episodes;
 * it runs only once the success rate of the last 100 training episodes is within ``gate``
@@ -25,11 +26,12 @@ from __future__ import annotations
 import csv
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
 from armreach_core.errors import ConfigError
@@ -38,6 +40,8 @@ from armreach_core.errors import ConfigError
 VALIDATION = "validation.csv"
 #: Its columns.
 COLUMNS = ("timesteps", "train_seconds", "episodes", "successes", "success_rate", "passed", "seconds")
+#: Episodes an evaluation runs side by side (one policy call for all of them).
+BATCH = 10
 
 
 @dataclass(frozen=True)
@@ -86,25 +90,49 @@ class Validation:
         return self.successes / self.episodes if self.episodes else float("nan")
 
 
-def validate(policy: Callable[[Any], Any], env: Any, spec: UntilSuccess) -> Validation:
-    """Run ``policy`` (observation -> action) on ``env`` for up to ``spec.episodes`` seeded
-    episodes, stopping at the failure that decides the outcome."""
+def validate(policy: Callable[[Any], Any], envs: Sequence[Any], spec: UntilSuccess) -> Validation:
+    """Run ``policy`` (a batch of observations -> a batch of actions) for up to ``spec.episodes``
+    seeded episodes on ``envs`` side by side, stopping at the failure that decides the outcome.
+
+    Episode ``i`` is reset with ``spec.seed + i`` whichever env runs it, so the outcome is the
+    same for any number of envs: one policy call serves them all.
+    """
     t0 = time.perf_counter()
-    failures = successes = 0
-    for i in range(spec.episodes):
-        obs, _ = env.reset(seed=spec.seed + i)
-        while True:
-            obs, _, terminated, truncated, info = env.step(policy(obs))
-            if terminated or truncated:
-                break
-        if info["is_success"]:
-            successes += 1
+    failures = successes = started = 0
+    obs: list[Any] = [None] * len(envs)
+    running = [False] * len(envs)
+
+    def start(i: int) -> None:
+        nonlocal started
+        if started < spec.episodes:
+            obs[i], _ = envs[i].reset(seed=spec.seed + started)
+            started += 1
+            running[i] = True
         else:
-            failures += 1
-            if failures > spec.allowed_failures:
-                break
-    ran = successes + failures
-    return Validation(ran, successes, failures <= spec.allowed_failures, time.perf_counter() - t0)
+            running[i] = False
+
+    for i in range(len(envs)):
+        start(i)
+    while any(running) and failures <= spec.allowed_failures:
+        active = [i for i, on in enumerate(running) if on]
+        actions = policy(_stack([obs[i] for i in active]))
+        for action, i in zip(actions, active, strict=True):
+            obs[i], _, terminated, truncated, info = envs[i].step(action)
+            if terminated or truncated:
+                if info["is_success"]:
+                    successes += 1
+                else:
+                    failures += 1
+                start(i)
+    passed = failures <= spec.allowed_failures and successes + failures == spec.episodes
+    return Validation(successes + failures, successes, passed, time.perf_counter() - t0)
+
+
+def _stack(observations: list[Any]) -> Any:
+    """A batch of observations: stacked arrays, or a dict of stacked arrays (goal-conditioned envs)."""
+    if isinstance(observations[0], dict):
+        return {key: np.stack([o[key] for o in observations]) for key in observations[0]}
+    return np.stack(observations)
 
 
 class StopOnSuccessCallback(BaseCallback):
@@ -126,7 +154,7 @@ class StopOnSuccessCallback(BaseCallback):
         self.make_env = make_env
         self.path = run_dir / VALIDATION
         self.train_seconds = train_seconds
-        self.env: Any = None
+        self.envs: list[Any] = []
         self.last = 0
         #: The evaluation that stopped training, if one did.
         self.passed: Validation | None = None
@@ -141,14 +169,14 @@ class StopOnSuccessCallback(BaseCallback):
         if steps - self.last < self.spec.every or not self._gate_open():
             return True
         self.last = steps
-        if self.env is None:
-            self.env = self.make_env()
+        if not self.envs:
+            self.envs = [self.make_env() for _ in range(min(self.spec.episodes, BATCH))]
         model = self.model
 
         def policy(obs: Any) -> Any:
             return model.predict(obs, deterministic=True)[0]
 
-        result = validate(policy, self.env, self.spec)
+        result = validate(policy, self.envs, self.spec)
         self.seconds += result.seconds
         self._record(steps, result)
         if result.passed:
@@ -181,9 +209,9 @@ class StopOnSuccessCallback(BaseCallback):
             )
 
     def _on_training_end(self) -> None:
-        if self.env is not None:
-            self.env.close()
-            self.env = None
+        for env in self.envs:
+            env.close()
+        self.envs = []
 
 
 def read_validations(run_dir: Path) -> list[dict[str, float]]:

@@ -158,6 +158,8 @@ class Motors:
         self.qpos, self.qvel = qpos, qvel
         self.targets = np.zeros(len(qvel))
         self.gains = np.full(len(qvel), POSITION_GAIN)
+        # views of MjData when the motor joints are contiguous (the usual case), found once
+        self._qpos_at, self._qvel_at = _contiguous(qpos), _contiguous(qvel)
 
     def step(self, model: Any, data: Any, nstep: int) -> None:
         """``nstep`` physics steps, the motors solved in each."""
@@ -168,20 +170,23 @@ class Motors:
         stiffness = self.gains / (dt * dt)
         offset = stiffness * self.targets
         inv_dt = 1.0 / dt
-        qpos_at, qvel_at = _contiguous(self.qpos), _contiguous(self.qvel)
+        qpos_at, qvel_at = self._qpos_at, self._qvel_at
         views = isinstance(qpos_at, slice) and isinstance(qvel_at, slice)
         q, v = data.qpos[qpos_at], data.qvel[qvel_at]  # views of MjData when slices
-        aref = np.empty(n)
+        aref, scaled = np.empty(n), np.empty(n)
+        multiply, subtract = np.multiply, np.subtract
+        step1, step2 = mujoco.mj_step1, mujoco.mj_step2
         for _ in range(nstep):
-            mujoco.mj_step1(model, data)
+            step1(model, data)
             if not views:
                 q, v = data.qpos[qpos_at], data.qvel[qvel_at]
-            np.multiply(q, stiffness, out=aref)
-            np.subtract(offset, aref, out=aref)
-            aref -= v * inv_dt
+            multiply(q, stiffness, out=aref)
+            subtract(offset, aref, out=aref)
+            multiply(v, inv_dt, out=scaled)
+            subtract(aref, scaled, out=aref)
             first = data.ne + data.nf - n
             data.efc_aref[first : first + n] = aref
-            mujoco.mj_step2(model, data)
+            step2(model, data)
 
 
 def _contiguous(index: npt.NDArray[np.intp]) -> slice | npt.NDArray[np.intp]:
