@@ -23,7 +23,7 @@ from armreach_core.robot.ik import RESTARTS, IKPolicy
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
-    from stable_baselines3.common.vec_env import DummyVecEnv
+    from stable_baselines3.common.vec_env import VecEnv
 
 
 class Agent(Protocol):
@@ -61,10 +61,13 @@ def env_kwargs(config: RunConfig, *, backend: str | None = None, evaluation: boo
     return kwargs
 
 
-def make_vec_env(config: RunConfig, run_dir: Path, seed: int, n_envs: int, *, append: bool) -> DummyVecEnv:
-    """``n_envs`` Monitor-wrapped envs in one process, logging episodes to ``run_dir/monitor/``.
+def make_vec_env(config: RunConfig, run_dir: Path, seed: int, n_envs: int, *, append: bool) -> VecEnv:
+    """``n_envs`` Monitor-wrapped envs, logging episodes to ``run_dir/monitor/``.
 
-    Env ``i`` is seeded ``seed + i`` at its first reset (SB3's ``VecEnv.seed``).
+    Env ``i`` is seeded ``seed + i`` at its first reset (SB3's ``VecEnv.seed``). They run in
+    this process, or each in a process of its own when the preset says ``vec_env: subprocess``
+    (SB3's ``SubprocVecEnv``: the physics of a step then runs on every core; the same
+    transitions either way).
     """
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
@@ -90,9 +93,24 @@ def make_vec_env(config: RunConfig, run_dir: Path, seed: int, n_envs: int, *, ap
 
         return make
 
-    vec = DummyVecEnv([factory(i) for i in range(n_envs)])
+    factories = [factory(i) for i in range(n_envs)]
+    vec: VecEnv
+    if config.settings.get("vec_env") == "subprocess" and n_envs > 1:
+        from stable_baselines3.common.vec_env import SubprocVecEnv
+
+        # fork starts a worker in milliseconds; JAX's threads do not survive it, so after JAX, a fresh interpreter
+        vec = SubprocVecEnv(factories, start_method="fork" if _fork_safe() else "forkserver")
+    else:
+        vec = DummyVecEnv(factories)
     vec.seed(seed)
     return vec
+
+
+def _fork_safe() -> bool:
+    import multiprocessing
+    import sys
+
+    return "fork" in multiprocessing.get_all_start_methods() and "jax" not in sys.modules
 
 
 def build_model(

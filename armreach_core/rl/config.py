@@ -43,7 +43,7 @@ DEFAULT_CHECKPOINT_EVERY = 10_000
 #: Episode limit of evaluation (the paper's task) when a run records none.
 DEFAULT_EVAL_MAX_EPISODE_STEPS = 2048
 #: Settings that change how fast a run goes, not what it learns.
-RUNTIME_ONLY = ("torch_threads", "checkpoint_every", "until_success")
+RUNTIME_ONLY = ("torch_threads", "checkpoint_every", "until_success", "vec_env")
 #: The keys of ``config.yaml``, in the order they are written.
 KEYS = (
     "algo",

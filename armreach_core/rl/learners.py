@@ -54,7 +54,16 @@ ARGUMENT_OF = {
     "policy": "policy_kwargs",
 }
 #: Preset keys that are not constructor arguments at all.
-NOT_ARGUMENTS = ("timesteps", "n_envs", "torch_threads", "env", "checkpoint_every", "learner", "until_success")
+NOT_ARGUMENTS = (
+    "timesteps",
+    "n_envs",
+    "torch_threads",
+    "env",
+    "checkpoint_every",
+    "learner",
+    "until_success",
+    "vec_env",
+)
 #: Where a learner comes from, for the error that says what to install.
 INSTALL = {
     "sb3": "pip install 'armreach[rl]' (it brings stable-baselines3 and sb3-contrib)",

@@ -190,6 +190,8 @@ COMMON: dict[str, Check] = {
     "checkpoint_every": _num(int, 1),
     # stop at the first held-out evaluation at or above a success rate (armreach_core.rl.validation)
     "until_success": _section(UNTIL_SUCCESS_SCHEMA),
+    # where the n_envs envs run: this process (dummy) or one process each (subprocess)
+    "vec_env": _choice("dummy", "subprocess"),
     # the library that trains (armreach_core.rl.learners)
     "learner": _choice(*LEARNERS),
 }
