@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 
 import numpy as np
 import pytest
@@ -31,6 +32,29 @@ def test_bare_loop_does_the_physics_of_env_steps(backend: str) -> None:
         env.close()
     np.testing.assert_allclose(q_bare, q_env, atol=1e-9)
     np.testing.assert_allclose(qd_bare, qd_env, atol=1e-7)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_engine_timing_runs_the_physics_of_env_steps_and_counts_part_of_it(backend: str) -> None:
+    """``engine_seconds`` reaches the env's state like the bare loop, and counts less time than the whole loop."""
+    env = ArmReach6DOFEnv(backend=backend)
+    try:
+        deltas = np.random.default_rng(3).uniform(-1, 1, (60, 6)) * env.max_joint_step
+        probes = load_backend_probes(backend)
+        assert probes.engine_seconds is not None and probes.bare_loop is not None
+        env.reset(seed=5)
+        bare_loop = probes.bare_loop
+        bare_loop(env.backend, deltas)
+        q_bare = env.backend.joint_state()[0]
+        env.reset(seed=5)
+        t0 = time.perf_counter()
+        inside = probes.engine_seconds(env.backend, deltas)
+        whole = time.perf_counter() - t0
+        q_engine = env.backend.joint_state()[0]
+    finally:
+        env.close()
+    np.testing.assert_allclose(q_engine, q_bare, atol=1e-9)
+    assert 0.0 < inside < whole
 
 
 def test_bench_command_writes_json_and_table(tmp_path, capsys) -> None:

@@ -61,10 +61,15 @@ class BackendProbes:
             effector. The floor an env step is measured against; ``None``: not offered.
         live_clients: engine connections open in this process (leak checks); ``None`` for
             engines without connections.
+        engine_seconds: ``engine_seconds(backend, deltas)`` runs the bare loop and returns
+            only the seconds spent inside the engine's own physics-step calls (PyBullet's
+            ``stepSimulation``, MuJoCo's ``mj_step1`` and ``mj_step2``): what an env step
+            costs at the least; ``None``: not offered.
     """
 
     bare_loop: Callable[[Backend, FloatArray], None] | None = None
     live_clients: Callable[[], int] | None = None
+    engine_seconds: Callable[[Backend, FloatArray], float] | None = None
 
 
 @dataclass(frozen=True)

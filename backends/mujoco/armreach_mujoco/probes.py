@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from armreach_core.backend import Backend
@@ -32,4 +34,35 @@ def bare_loop(backend: Backend, deltas: FloatArray) -> None:
         _ee = data.xpos[ee].copy()
 
 
-PROBES = BackendProbes(bare_loop=bare_loop)
+def engine_seconds(backend: Backend, deltas: FloatArray) -> float:
+    """The bare loop, timing only MuJoCo's own step calls (``mj_step1``, ``mj_step2``): the motor's
+    reference, written between them, and everything else is left out."""
+    assert isinstance(backend, MuJoCoBackend)
+    compiled, substeps = backend.compiled, backend.physics.substeps
+    model, data = compiled.model, backend.data
+    lower, upper = backend.robot.lower, backend.robot.upper
+    motors = Motors(compiled.qpos, compiled.qvel)
+    n = len(compiled.qvel)
+    dt = float(model.opt.timestep)
+    stiffness = motors.gains / (dt * dt)
+    clock, step1, step2 = time.perf_counter, mujoco.mj_step1, mujoco.mj_step2
+    total = 0.0
+    q = data.qpos[compiled.qpos]
+    for delta in deltas:
+        offset = stiffness * np.minimum(np.maximum(q + delta, lower), upper)
+        for _ in range(substeps):
+            t0 = clock()
+            step1(model, data)
+            total += clock() - t0
+            aref = offset - stiffness * data.qpos[compiled.qpos] - data.qvel[compiled.qvel] / dt
+            first = data.ne + data.nf - n
+            data.efc_aref[first : first + n] = aref
+            t0 = clock()
+            step2(model, data)
+            total += clock() - t0
+        mujoco.mj_kinematics(model, data)
+        q = data.qpos[compiled.qpos]
+    return total
+
+
+PROBES = BackendProbes(bare_loop=bare_loop, engine_seconds=engine_seconds)

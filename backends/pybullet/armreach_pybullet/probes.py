@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from armreach_core.backend import Backend
@@ -38,4 +40,27 @@ def bare_loop(backend: Backend, deltas: FloatArray) -> None:
         _ee = pb.getLinkState(body, ee, computeForwardKinematics=True, physicsClientId=cid)[4]
 
 
-PROBES = BackendProbes(bare_loop=bare_loop, live_clients=live_clients)
+def engine_seconds(backend: Backend, deltas: FloatArray) -> float:
+    """The bare loop, timing only PyBullet's own ``stepSimulation`` calls (its motors run inside them)."""
+    assert isinstance(backend, PyBulletBackend)
+    cid, body, joints, substeps = backend.client, backend.body, backend.joint_indices, backend.physics.substeps
+    lower, upper = backend.robot.lower, backend.robot.upper
+    forces, kp, kd, control = backend.motor_forces, backend.position_gains, backend.velocity_gains, pb.POSITION_CONTROL
+    clock, step = time.perf_counter, pb.stepSimulation
+    total = 0.0
+    q = np.array([s[0] for s in pb.getJointStates(body, joints, physicsClientId=cid)])
+    for delta in deltas:
+        target = np.minimum(np.maximum(q + delta, lower), upper)
+        pb.setJointMotorControlArray(
+            body, joints, control, targetPositions=target.tolist(), forces=forces,
+            positionGains=kp, velocityGains=kd, physicsClientId=cid,
+        )  # fmt: skip
+        for _ in range(substeps):
+            t0 = clock()
+            step(physicsClientId=cid)
+            total += clock() - t0
+        q = np.array([s[0] for s in pb.getJointStates(body, joints, physicsClientId=cid)])
+    return total
+
+
+PROBES = BackendProbes(bare_loop=bare_loop, live_clients=live_clients, engine_seconds=engine_seconds)
