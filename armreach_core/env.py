@@ -11,6 +11,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Mapping
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -80,6 +81,10 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             default the origin. Positions in observations are in the world frame.
         base_orientation: the root link's orientation, a quaternion ``(w, x, y, z)``
             (normalized); default no rotation.
+        package_dirs: where ROS packages live, ``{name: folder}``, for ``$(find NAME)`` and
+            ``package://NAME/...`` (also ``ROS_PACKAGE_PATH``); their files may be read.
+        xacro_args: arguments of a xacro ``urdf``, ``{name: value}``.
+        allow_xacro_env: let a xacro ``urdf`` read environment variables (``$(env ...)``).
         arm: the arm as one :class:`~armreach_core.robot.spec.ArmSpec`, instead of ``urdf``,
             ``robot``, ``ee_link``, ``home``, ``tool_joints``, ``base_position``,
             ``base_orientation`` and ``allow_external_meshes``.
@@ -111,6 +116,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         allow_external_meshes: bool | None = None,
         base_position: npt.ArrayLike | None = None,
         base_orientation: npt.ArrayLike | None = None,
+        package_dirs: Mapping[str, str | os.PathLike[str]] | None = None,
+        xacro_args: Mapping[str, Any] | None = None,
+        allow_xacro_env: bool | None = None,
         arm: ArmSpec | None = None,
         **task_options: Any,
     ) -> None:
@@ -139,6 +147,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             base_position=base_position,
             base_orientation=base_orientation,
             allow_external_meshes=allow_external_meshes,
+            package_dirs=package_dirs,
+            xacro_args=xacro_args,
+            allow_xacro_env=allow_xacro_env,
         )
         if arm is not None:
             if given != ArmSpec():
