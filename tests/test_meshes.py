@@ -11,7 +11,7 @@ from lxml import etree
 
 from armreach_core import ArmReach6DOFEnv
 from armreach_core.robot.hulls import simulation_urdf
-from armreach_core.robot.meshes import converted
+from armreach_core.robot.meshes import converted, readable
 from armreach_core.robot.model import RobotModel
 from tests.conftest import BACKENDS
 
@@ -41,7 +41,7 @@ def _arm_with_glb(folder: Path, ar6_urdf: Path) -> Path:
 def test_a_glb_converts_once_to_an_obj_with_its_colour(tmp_path, monkeypatch, ar6_urdf):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     robot = RobotModel(_arm_with_glb(tmp_path / "arm", ar6_urdf))
-    root = etree.fromstring(simulation_urdf(robot, visuals=True, formats=(".obj", ".stl")))
+    root = etree.fromstring(readable(simulation_urdf(robot, visuals=True), (".obj", ".stl")))
     tool = next(link for link in root.iter("link") if link.get("name") == "tool0")
     visual, collision = tool.find("visual"), tool.find("collision")
     for element in (visual, collision):
@@ -66,5 +66,30 @@ def test_a_glb_meshed_arm_builds_renders_and_steps(tmp_path, monkeypatch, ar6_ur
             env.step(env.action_space.sample())
         frame = env.render()
         assert frame is not None and frame.ndim == 3
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("backend", ["pybullet", "mujoco"])
+def test_an_engine_exception_while_stepping_names_the_arm_the_link_and_the_fix(monkeypatch, backend):
+    """Whatever an engine raises mid-episode reaches the user as an ArmReachError, not a traceback."""
+    from armreach_core import ArmReachError
+
+    if backend not in BACKENDS:
+        pytest.skip(f"the {backend} backend is not installed")
+    env = ArmReach6DOFEnv(backend=backend)
+    try:
+        env.reset(seed=0)
+
+        def fail(*args, **kwargs):
+            raise SystemError("inverse dynamics: bad inertia of body forearm_link")
+
+        monkeypatch.setattr(type(env.backend), "step", fail)
+        with pytest.raises(ArmReachError) as caught:
+            env.step(env.action_space.sample())
+        message = str(caught.value)
+        assert type(caught.value) is ArmReachError
+        assert f"arm {env.robot.name!r}" in message and "'forearm_link'" in message
+        assert "check its <inertial>" in message and "SystemError" in message
     finally:
         env.close()

@@ -22,7 +22,6 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
-from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -116,11 +115,10 @@ def write_obj(mesh: Any, out: Path) -> Path:
     return out
 
 
-def simulation_urdf(robot: RobotModel, *, visuals: bool, formats: Sequence[str] | None = None) -> bytes:
+def simulation_urdf(robot: RobotModel, *, visuals: bool) -> bytes:
     """The robot's resolved URDF with collision meshes replaced by their hulls and, unless
-    ``visuals``, without ``<visual>`` elements (an env that never renders needs none); with
-    ``formats`` (the mesh suffixes an engine reads), every other mesh converted to ``.obj``
-    (:func:`armreach_core.robot.meshes.readable`)."""
+    ``visuals``, without ``<visual>`` elements (an env that never renders needs none).
+    :func:`armreach_core.robot.meshes.readable` then converts the meshes an engine cannot read."""
     root = etree.fromstring(robot.parsed.resolved_xml)
     for collision in root.iter("collision"):
         for mesh in collision.iter("mesh"):
@@ -131,9 +129,4 @@ def simulation_urdf(robot: RobotModel, *, visuals: bool, formats: Sequence[str] 
         for link in root.iter("link"):
             for visual in link.findall("visual"):
                 link.remove(visual)
-    text = bytes(etree.tostring(root))
-    if formats is None:
-        return text
-    from armreach_core.robot.meshes import readable
-
-    return readable(text, formats)
+    return bytes(etree.tostring(root))

@@ -17,6 +17,7 @@ from lxml import etree
 
 from armreach_core.errors import URDFError
 from armreach_core.robot.hulls import simulation_urdf
+from armreach_core.robot.meshes import readable
 from armreach_core.robot.model import RobotModel
 from armreach_mujoco.engine import mujoco
 
@@ -30,7 +31,7 @@ def urdf_for_mujoco(robot: RobotModel, visuals: bool = True) -> str:
     Collision meshes are their convex hulls (what MuJoCo collides anyway) and, without
     ``visuals``, there are no visual meshes (:func:`armreach_core.robot.hulls.simulation_urdf`).
     """
-    root = etree.fromstring(simulation_urdf(robot, visuals=visuals, formats=NATIVE_MESHES))
+    root = etree.fromstring(readable(simulation_urdf(robot, visuals=visuals), NATIVE_MESHES))
     for old in root.findall("mujoco"):
         root.remove(old)
     block = etree.SubElement(root, "mujoco")

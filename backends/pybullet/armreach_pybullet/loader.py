@@ -8,6 +8,7 @@ import tempfile
 from armreach_core.backend import PhysicsConfig
 from armreach_core.errors import URDFError
 from armreach_core.robot.hulls import simulation_urdf
+from armreach_core.robot.meshes import readable
 from armreach_core.robot.model import RobotModel
 from armreach_pybullet.engine import engine_output_to_log, pb
 
@@ -62,7 +63,7 @@ def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int
     with tempfile.TemporaryDirectory(prefix="armreach-") as tmp:
         path = os.path.join(tmp, "robot.urdf")
         with open(path, "wb") as handle:
-            handle.write(simulation_urdf(robot, visuals=physics.visuals, formats=PYBULLET_MESHES))
+            handle.write(readable(simulation_urdf(robot, visuals=physics.visuals), PYBULLET_MESHES))
         try:
             with engine_output_to_log():
                 body = pb.loadURDF(
