@@ -93,3 +93,33 @@ def test_an_engine_exception_while_stepping_names_the_arm_the_link_and_the_fix(m
         assert "check its <inertial>" in message and "SystemError" in message
     finally:
         env.close()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", ["pybullet", "mujoco"])
+def test_a_published_glb_meshed_arm_builds_renders_and_steps(backend):
+    """dexmate-urdf's Vega upper body, as published: glTF visual meshes, OBJ collision meshes in a
+    sibling package; drawn (so every .glb is converted), stepped, and its colours carried over."""
+    from armreach_core.diagnostics.corpus import corpus_arm
+
+    if backend not in BACKENDS:
+        pytest.skip(f"the {backend} backend is not installed")
+    arm = corpus_arm("vega-1u-left")
+    if arm.path is None:
+        pytest.skip(f"{arm.name} is not installed: {arm.install}")
+    glbs = {
+        m.get("filename") for m in etree.parse(str(arm.path)).iter("mesh") if m.get("filename", "").endswith(".glb")
+    }
+    assert glbs  # the description is glTF-meshed as published
+    env = ArmReach6DOFEnv(backend=backend, urdf=arm.path, **arm.options(), render_mode="rgb_array")
+    try:
+        env.reset(seed=0)
+        for _ in range(5):
+            observation, *_ = env.step(env.action_space.sample())
+        assert np.all(np.isfinite(observation))
+        frame = env.render()
+        assert frame is not None and frame.ndim == 3
+        sent = etree.fromstring(readable(simulation_urdf(env.robot, visuals=True), (".obj", ".stl")))
+        assert not [m for m in sent.iter("mesh") if m.get("filename", "").endswith(".glb")]
+    finally:
+        env.close()
