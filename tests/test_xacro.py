@@ -238,3 +238,27 @@ def test_without_the_xacro_package_the_error_says_the_file_is_xacro_and_what_to_
     with pytest.raises(URDFError, match=r"is a xacro file .*pip install xacro") as caught:
         build_robot(ArmSpec.create(top, package_dirs={"tools_support": tools}))
     assert "3 numbers" not in str(caught.value)
+
+
+def test_a_sweep_arm_and_a_run_folder_carry_the_description(arm, tmp_path):
+    """A sweep's arm entry takes the packages and arguments; the run it makes records them, and the
+    URDF the xacro expanded to, so that the run can be made again from its folder."""
+    from armreach_core.rl import runs
+    from armreach_core.rl.config import resolve_config
+    from armreach_core.rl.sweep_spec import parse_arm
+
+    top, tools = arm
+    entry = {"urdf": str(top), "package_dirs": {"tools_support": str(tools)}, "xacro_args": {"yaw": 10}}
+    sweep_arm = parse_arm(entry, "arms[0]")
+    assert sweep_arm.spec.xacro_args == (("yaw", "10"),)
+    run = resolve_config(algo="ik", preset="paper", urdf=sweep_arm.urdf, placement=sweep_arm.placement())
+    assert run.arm == sweep_arm.spec
+    folder = tmp_path / "run"
+    folder.mkdir()
+    runs.write_config(folder, run)
+    record = yaml.safe_load((folder / runs.CONFIG).read_text())["arm"]
+    assert record["xacro_args"] == {"yaw": "10"} and record["package_dirs"] == {"tools_support": str(tools.resolve())}
+    assert runs.read_config(folder).arm == sweep_arm.spec
+    expanded = (folder / runs.ARM_URDF).read_bytes()
+    assert expanded == build_robot(sweep_arm.spec).parsed.resolved_xml
+    assert b"xacro" not in expanded.split(b"?>", 1)[1]
