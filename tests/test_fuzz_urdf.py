@@ -1071,6 +1071,26 @@ def test_a_mutated_urdf_builds_or_is_refused_as_declared_many(worker, place, dat
     _check(worker, place, data.draw(mutated_urdfs(place)))
 
 
+@pytest.mark.skipif("pybullet" not in BACKENDS, reason="PyBullet is not installed")
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="PyBullet reads back no joint of a body with 128 joints or more (getJointState fails); armreach "
+    "accepts up to MAX_LINKS links, and PyBullet's backend does not refuse more than PyBullet serves",
+)
+def test_a_robot_of_more_links_than_pybullet_serves_builds(worker, place):
+    """ar6 and 120 bare links on fixed joints: 129 links, 128 joints. MuJoCo builds it."""
+    root = etree.fromstring(SOURCE)
+    for i in range(PYBULLET_LINKS - len(root.findall("link")) + 1):
+        root.append(etree.Element("link", name=f"extra_{i}"))
+        joint = etree.SubElement(root, "joint", name=f"extra_j{i}", type="fixed")
+        etree.SubElement(joint, "parent", link="world")
+        etree.SubElement(joint, "child", link=f"extra_{i}")
+    path = place.robot / "many-links.urdf"
+    path.write_bytes(etree.tostring(root))
+    judge(None, worker.build(path))
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_heavy_link_with_its_centre_of_mass_off_axis_builds_on_pybullet(tmp_path, backend):
     """An industrial arm's upper arm: 120 kg, its centre of mass 0.3 m and 0.4 m off two axes.
