@@ -11,6 +11,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Mapping
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -18,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.backend import ArmState, Backend, Camera, PhysicsConfig
+from armreach_core.engine_errors import engine_failure
 from armreach_core.errors import ActionError, ArmReachError, ConfigError, DisplayUnavailableError
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.plugins.lookup import load_backend_class, load_robot, resolve_arm, task_spec
@@ -80,6 +82,10 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             default the origin. Positions in observations are in the world frame.
         base_orientation: the root link's orientation, a quaternion ``(w, x, y, z)``
             (normalized); default no rotation.
+        package_dirs: where ROS packages live, ``{name: folder}``, for ``$(find NAME)`` and
+            ``package://NAME/...`` (also ``ROS_PACKAGE_PATH``); their files may be read.
+        xacro_args: arguments of a xacro ``urdf``, ``{name: value}``.
+        allow_xacro_env: let a xacro ``urdf`` read environment variables (``$(env ...)``).
         arm: the arm as one :class:`~armreach_core.robot.spec.ArmSpec`, instead of ``urdf``,
             ``robot``, ``ee_link``, ``home``, ``tool_joints``, ``base_position``,
             ``base_orientation`` and ``allow_external_meshes``.
@@ -111,6 +117,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         allow_external_meshes: bool | None = None,
         base_position: npt.ArrayLike | None = None,
         base_orientation: npt.ArrayLike | None = None,
+        package_dirs: Mapping[str, str | os.PathLike[str]] | None = None,
+        xacro_args: Mapping[str, Any] | None = None,
+        allow_xacro_env: bool | None = None,
         arm: ArmSpec | None = None,
         **task_options: Any,
     ) -> None:
@@ -139,6 +148,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             base_position=base_position,
             base_orientation=base_orientation,
             allow_external_meshes=allow_external_meshes,
+            package_dirs=package_dirs,
+            xacro_args=xacro_args,
+            allow_xacro_env=allow_xacro_env,
         )
         if arm is not None:
             if given != ArmSpec():
@@ -182,7 +194,13 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             self.compute_truncated = self._goal_truncated
 
         backend_cls = load_backend_class(backend)
-        self._backend: Backend | None = backend_cls(self.robot, self.physics, viewer=render_mode == "human")
+        self._backend: Backend | None = None
+        try:
+            self._backend = backend_cls(self.robot, self.physics, viewer=render_mode == "human")
+        except ArmReachError:
+            raise
+        except Exception as exc:  # the engine's own exception: name the arm, a link and the fix
+            raise engine_failure(self.robot, backend, "building", exc) from None
         self._shown_at = 0.0  # when the live window last showed a step (render_mode="human")
         self.task.setup_scene(self._backend)
         self._state: ArmState | None = None
@@ -243,7 +261,12 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         super().reset(seed=seed)
         backend = self.backend
-        backend.reset_joints(self.robot.home)
+        try:
+            backend.reset_joints(self.robot.home)
+        except ArmReachError:
+            raise
+        except Exception as exc:
+            raise engine_failure(self.robot, self.backend_name, "resetting", exc) from None
         self.task.initialize_episode(backend, self.np_random)
         state, unstable = self._checked_state(backend, None)
         self._state = state
@@ -264,8 +287,13 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         clipped = np.minimum(np.maximum(target, self.robot.lower), self.robot.upper)
         excess = target - clipped
         violated = bool(excess.dot(excess) > 0.0)  # one call instead of two comparisons and reductions
-        backend.set_joint_targets(clipped)
-        backend.step()
+        try:
+            backend.set_joint_targets(clipped)
+            backend.step()
+        except ArmReachError:
+            raise
+        except Exception as exc:  # the engine's own exception
+            raise engine_failure(self.robot, self.backend_name, "stepping", exc) from None
         state, unstable = self._checked_state(backend, self._state)
         self._state = state
         self._elapsed += 1

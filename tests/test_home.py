@@ -7,6 +7,7 @@ import pytest
 
 from armreach_core import ConfigError, RobotModel, URDFError
 from armreach_core.diagnostics.corpus import CORPUS
+from armreach_core.robot.factory import build_robot
 from armreach_core.robot.home import GROUND_CLEARANCE, describe, ground_violations
 from armreach_core.robot.ik import solve_with_restarts
 from armreach_core.robot.statics import holdable
@@ -24,10 +25,33 @@ def _ik_arms():
 def _load(arm):
     if arm.path is None:
         pytest.skip(f"{arm.name}: `{arm.install}` first")
-    return RobotModel(arm.path)
+    return build_robot(arm.spec())
 
 
-@pytest.mark.parametrize("arm", CORPUS, ids=[a.name for a in CORPUS])
+#: Corpus arms whose published description has no home that passes, and why (measured).
+NO_GOOD_HOME = {
+    "kuka-kr210": "its URDF effort limits hold it in under 5 % of its poses, its zero pose not among them",
+    "vega-1u-left": "its head's collision box overlaps its torso's at the zero pose and the search finds no other home",
+}
+#: Corpus arms added with the xacro and glTF descriptions: their checks take 5-20 s each.
+LARGE = ("kuka-kr16", "kuka-kr210", "abb-irb140", "vega-1u-left")
+
+
+def _home_arms():
+    return [
+        pytest.param(
+            arm,
+            id=arm.name,
+            marks=[
+                *([pytest.mark.slow] if arm.name in LARGE else []),
+                *([pytest.mark.xfail(strict=True, reason=NO_GOOD_HOME[arm.name])] if arm.name in NO_GOOD_HOME else []),
+            ],
+        )
+        for arm in CORPUS
+    ]
+
+
+@pytest.mark.parametrize("arm", _home_arms())
 def test_default_home_is_clear_and_dexterous(arm):
     robot = _load(arm)
     facts = describe(robot, robot.home)

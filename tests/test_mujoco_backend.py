@@ -444,7 +444,7 @@ def _worst_fk_error(backend, robot: RobotModel, configs) -> float:
 def mesh_cache(tmp_path, monkeypatch) -> Iterator[Path]:
     """The converted-mesh folder, under tmp_path; the models built meanwhile are forgotten afterwards."""
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
-    yield tmp_path / "cache" / "armreach" / "mujoco-meshes"
+    yield tmp_path / "cache" / "armreach" / "meshes"
     compiled.clear_cache()  # they name files under tmp_path
 
 
@@ -453,10 +453,9 @@ def test_meshes_mujoco_cannot_read_are_converted_and_cached(tmp_path, mesh_cache
     urdf = _write_mesh_arm(tmp_path, ext)
     import trimesh
 
-    # PyBullet reads .dae (and .stl) itself but no .ply: the .ply arm runs on MuJoCo only.
-    backends = ["mujoco", "pybullet"] if ext == "dae" else ["mujoco"]
-    if "pybullet" in backends:
-        pytest.importorskip("pybullet")
+    # PyBullet reads .dae (and .stl) itself, and is handed .ply meshes converted too
+    backends = ["mujoco", "pybullet"]
+    pytest.importorskip("pybullet")
     for name in backends:
         # rendering: the visual meshes are loaded (and converted) too
         env = ArmReach6DOFEnv(backend=name, urdf=urdf, ee_link="tool0", render_mode="rgb_array")
@@ -484,7 +483,8 @@ def test_meshes_mujoco_cannot_read_are_converted_and_cached(tmp_path, mesh_cache
     # one .obj per converted mesh (<stem>-<digest>.obj), the same box as the original; base.stl is used as it is
     converted = {path.name.split("-")[0]: path for path in mesh_cache.glob("*.obj")}
     assert sorted(converted) == ["fore", "upper"]
-    assert sorted(p.suffix for p in mesh_cache.iterdir()) == [".obj", ".obj"]  # no shared material file
+    assert sorted(p.suffix for p in mesh_cache.glob("*.obj")) == [".obj", ".obj"]
+    assert not list(mesh_cache.glob("*.mtl"))  # no shared material file
     for _, filename, extents, _ in MESH_LINKS[1:]:
         mesh = trimesh.load(converted[Path(filename).stem], force="mesh")
         np.testing.assert_allclose(mesh.extents, extents, atol=1e-9)

@@ -381,7 +381,9 @@ def test_the_engines_stay_near_their_measured_gaps(arm, seed):
 @pytest.mark.slow
 @needs_both
 @pytest.mark.parametrize("seed", [0, 1])
-@pytest.mark.parametrize("arm", [arm.name for arm in CORPUS if arm.name not in FAST_ARMS])
+@pytest.mark.parametrize(
+    "arm", [arm.name for arm in CORPUS if arm.name not in FAST_ARMS and (arm.name, "random") in MEASURED]
+)  # arms with no measured gaps yet (the industrial ones): `armreach parity --corpus` reports theirs
 def test_the_engines_stay_near_their_measured_gaps_on_the_corpus(arm, seed):
     _assert_report(arm, run_parity(PAIR, _urdf(arm), steps=200, configs=200, seed=seed))
 

@@ -84,7 +84,7 @@ end_header
 """
 
 
-def test_a_mesh_format_pybullet_cannot_read_is_a_urdf_error(tmp_path, ar6_urdf):
+def test_a_mesh_format_pybullet_cannot_read_is_converted_and_a_broken_one_is_a_urdf_error(tmp_path, ar6_urdf):
     import pybullet as pb
 
     from armreach_core import URDFError
@@ -93,13 +93,17 @@ def test_a_mesh_format_pybullet_cannot_read_is_a_urdf_error(tmp_path, ar6_urdf):
     from armreach_core.robot.model import RobotModel
 
     (tmp_path / "tip.ply").write_text(TETRAHEDRON_PLY)
-    text = ar6_urdf.read_text()
-    geometry = '<geometry><mesh filename="tip.ply"/></geometry>'
-    text = text.replace('<link name="tool0">', f'<link name="tool0"><visual>{geometry}</visual>', 1)
-    urdf = tmp_path / "arm.urdf"
-    urdf.write_text(text)
-    robot = RobotModel(urdf)
+    (tmp_path / "broken.ply").write_text("ply\nformat ascii 1.0\nelement vertex 3\nend_header\n0 0\n")
+    robots = {}
+    for name in ("tip", "broken"):
+        text = ar6_urdf.read_text()
+        geometry = f'<geometry><mesh filename="{name}.ply"/></geometry>'
+        text = text.replace('<link name="tool0">', f'<link name="tool0"><visual>{geometry}</visual>', 1)
+        urdf = tmp_path / f"{name}.urdf"
+        urdf.write_text(text)
+        robots[name] = RobotModel(urdf)
+    load_backend_class("pybullet")(robots["tip"], PhysicsConfig(visuals=True)).close()  # .ply: converted to .obj
     connected_before = sum(pb.isConnected(i) for i in range(64))
-    with pytest.raises(URDFError, match=r"PyBullet reads only \.obj, \.stl, \.dae meshes .*tip\.ply.*convert"):
-        load_backend_class("pybullet")(robot, PhysicsConfig())
+    with pytest.raises(URDFError, match=r"broken\.ply.*could not be read by trimesh"):
+        load_backend_class("pybullet")(robots["broken"], PhysicsConfig(visuals=True))
     assert sum(pb.isConnected(i) for i in range(64)) == connected_before  # the client was not leaked

@@ -14,7 +14,7 @@ import pytest
 from armreach_core.diagnostics.corpus import corpus_arm
 from armreach_core.robot.bundled import asset_path
 from armreach_core.robot.model import RobotModel
-from armreach_core.robot.statics import HOLD_MARGIN, effort_ratio, gravity_torques, holdable
+from armreach_core.robot.statics import HOLD_MARGIN, effort_ratio, gravity_torques, holdable, joint_inertias
 from armreach_core.robot.workspace import ReachabilityMap
 
 pybullet = pytest.importorskip("pybullet")
@@ -59,6 +59,30 @@ def test_gravity_torques_match_pybullet_inverse_dynamics(name):
             theirs = np.array([tau[movable.index(n)] for n in robot.joint_names[: robot.arm_dof]])
             assert np.abs(theirs).max() > 0.01  # gravity loads the arm: the comparison means something
             np.testing.assert_allclose(mine, theirs, rtol=1e-9, atol=1e-9 * np.abs(theirs).max())
+    finally:
+        pybullet.disconnect(client)
+
+
+@pytest.mark.parametrize("name", ARMS)
+def test_joint_inertias_match_pybullet_mass_matrix(name):
+    """The diagonal of the joint-space mass matrix from the URDF alone: what the PyBullet backend
+    bounds damping with when Bullet's own inverse dynamics refuses a heavy arm."""
+    robot = RobotModel(_urdf(name))
+    client = pybullet.connect(pybullet.DIRECT)
+    try:
+        body = pybullet.loadURDF(
+            robot.urdf_path.as_posix(), useFixedBase=True, flags=pybullet.URDF_USE_INERTIA_FROM_FILE,
+            physicsClientId=client,
+        )  # fmt: skip
+        infos = [pybullet.getJointInfo(body, i, physicsClientId=client) for i in range(pybullet.getNumJoints(body))]
+        movable = [info[1].decode() for info in infos if info[2] != pybullet.JOINT_FIXED]
+        for q in robot.sample_configurations(np.random.default_rng(3), 3):
+            positions = dict(zip(robot.joint_names, q, strict=True))
+            positions.update(zip((h.name for h in robot.held_joints), robot.held_positions(q), strict=True))
+            matrix = pybullet.calculateMassMatrix(body, [float(positions[n]) for n in movable], physicsClientId=client)
+            ours = joint_inertias(robot, q, movable)
+            theirs = [matrix[i][i] for i in range(len(movable))]
+            np.testing.assert_allclose([ours[n] for n in movable], theirs, rtol=1e-6, atol=1e-9)
     finally:
         pybullet.disconnect(client)
 

@@ -8,7 +8,7 @@ from typing import Any
 
 from armreach_core.cli.checks import check_backends as check_installed
 from armreach_core.cli.checks import check_out, check_urdf
-from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
+from armreach_core.cli.robot_args import add_robot_arguments, description_kwargs, robot_kwargs
 
 
 def add_parser(sub: Any) -> None:
@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     backends = args.backends or installed_backends()
     check_backends(backends)  # at least one
     check_installed(backends)  # and each one's engine imports
-    check_urdf(args.urdf)
+    check_urdf(args.urdf, description_kwargs(args))
     sb3: dict[str, int] = {}
     learners: list[str] = []
     measure_sb3 = None

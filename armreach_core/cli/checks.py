@@ -8,8 +8,9 @@ half-made output folder behind.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 from armreach_core.errors import ConfigError
 
@@ -28,12 +29,20 @@ def check_backends(names: Sequence[str] | None) -> None:
         load_backend_class(name)
 
 
-def check_urdf(urdf: str | Path | None) -> None:
-    """The file is a URDF armreach reads: it exists, is XML, is a ``<robot>``, its meshes are in reach."""
+def check_urdf(urdf: str | Path | None, description: Mapping[str, Any] | None = None) -> None:
+    """The file is a URDF (or xacro) armreach reads: it exists, is XML, is a ``<robot>``, its meshes are
+    in reach; ``description``: the env's ``package_dirs``, ``xacro_args`` and ``allow_xacro_env``."""
     if urdf is not None:
+        from armreach_core.robot.spec import ArmSpec
         from armreach_core.robot.urdf import read_urdf
 
-        read_urdf(urdf)
+        spec = ArmSpec.create(urdf, **dict(description or {}))
+        read_urdf(
+            urdf,
+            package_dirs=dict(spec.package_dirs or ()),
+            xacro_args=dict(spec.xacro_args or ()),
+            allow_xacro_env=bool(spec.allow_xacro_env),
+        )
 
 
 def check_counts(**counts: tuple[int, int]) -> None:

@@ -16,7 +16,7 @@ from armreach_core.cli.checks import (
     check_out,
     check_urdf,
 )
-from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
+from armreach_core.cli.robot_args import add_robot_arguments, description_kwargs, robot_kwargs
 
 
 def add_parser(sub: Any) -> None:
@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     check_out(args.out)
     if args.corpus:
         return _corpus(args)
-    check_urdf(args.urdf)
+    check_urdf(args.urdf, description_kwargs(args))
     kwargs = robot_kwargs(args)
     report = inspect_robot(
         args.urdf,

@@ -10,10 +10,13 @@ from armreach_core.robot.spec import ArmSpec
 
 #: The robot flags' keys (argparse destinations), the env keyword argument of each.
 ROBOT_FLAGS = ("urdf", "ee_link", "home", "base_position", "base_orientation")
+#: The description flags' keys: how a xacro is expanded and where its packages are.
+DESCRIPTION_FLAGS = ("package_dirs", "xacro_args", "allow_xacro_env")
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser, *, urdf: bool = True, of_run: bool = False) -> None:
-    """``--urdf``, ``--ee-link``, ``--home``, ``--base-position`` and ``--base-orientation``.
+    """``--urdf``, ``--ee-link``, ``--home``, ``--base-position``, ``--base-orientation``, and
+    ``--package-dir``, ``--xacro-arg`` and ``--allow-xacro-env`` for the description.
 
     ``of_run``: the flags override a run's arm (``evaluate``), so each defaults to the run's.
     """
@@ -48,6 +51,56 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, urdf: bool = True, o
         metavar=("W", "X", "Y", "Z"),
         help=f"the root link's orientation as a quaternion {default('1 0 0 0')}",
     )
+    parser.add_argument(
+        "--package-dir",
+        dest="package_dirs",
+        action="append",
+        default=None,
+        metavar="NAME=PATH",
+        help="where ROS package NAME lives, for $(find NAME) and package://NAME/... (repeatable; "
+        "ROS_PACKAGE_PATH is read too); its files may be read",
+    )
+    parser.add_argument(
+        "--xacro-arg",
+        dest="xacro_args",
+        action="append",
+        default=None,
+        metavar="NAME:=VALUE",
+        help="an argument of a xacro --urdf (repeatable)",
+    )
+    parser.add_argument(
+        "--allow-xacro-env",
+        action="store_true",
+        default=None,
+        help="let a xacro --urdf read environment variables ($(env ...), $(optenv ...))",
+    )
+
+
+def _pairs(values: list[str] | None, separator: str, flag: str, what: str) -> dict[str, str] | None:
+    """``NAME<separator>VALUE`` strings as a mapping (``None`` when the flag was not given)."""
+    if values is None:
+        return None
+    out: dict[str, str] = {}
+    for text in values:
+        name, found, value = text.partition(separator)
+        if not found or not name.strip():
+            raise ConfigError(f"{flag} {text!r}: expected NAME{separator}{what}")
+        out[name.strip()] = value
+    return out
+
+
+def description_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    """The description flags that were given, as env keyword arguments (mappings)."""
+    out: dict[str, Any] = {}
+    dirs = _pairs(getattr(args, "package_dirs", None), "=", "--package-dir", "PATH")
+    xacro = _pairs(getattr(args, "xacro_args", None), ":=", "--xacro-arg", "VALUE")
+    if dirs is not None:
+        out["package_dirs"] = dirs
+    if xacro is not None:
+        out["xacro_args"] = xacro
+    if getattr(args, "allow_xacro_env", None):
+        out["allow_xacro_env"] = True
+    return out
 
 
 def arm_spec(args: argparse.Namespace) -> ArmSpec:
@@ -63,6 +116,7 @@ def arm_spec(args: argparse.Namespace) -> ArmSpec:
             getattr(args, "home", None),
             base_position=getattr(args, "base_position", None),
             base_orientation=getattr(args, "base_orientation", None),
+            **description_kwargs(args),
         )
     except ConfigError as exc:
         raise ConfigError(f"arm flags: {exc}") from None
@@ -76,4 +130,4 @@ def robot_kwargs(args: argparse.Namespace) -> dict[str, Any]:
         value = getattr(args, key, None)
         if value is not None:
             out[key] = tuple(value) if isinstance(value, list) else value
-    return out
+    return {**out, **description_kwargs(args)}

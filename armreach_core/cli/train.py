@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from armreach_core.cli.checks import check_backends, check_out, check_urdf
-from armreach_core.cli.robot_args import add_robot_arguments
+from armreach_core.cli.robot_args import DESCRIPTION_FLAGS, add_robot_arguments, description_kwargs
 from armreach_core.errors import ConfigError
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 
@@ -121,14 +121,18 @@ def run(args: argparse.Namespace) -> int:
             ee_link=args.ee_link,
             device=args.device,
             threads=args.threads,
-            placement={key: getattr(args, key) for key in ("home", "base_position", "base_orientation")},
+            placement={
+                **{key: getattr(args, key) for key in ("home", "base_position", "base_orientation")},
+                **description_kwargs(args),
+            },
             learner=args.learner,
         )
         if args.until_success is not None:
             config = with_until_success(config, args.until_success)
         # before the run folder is made: a failing command leaves none behind
         check_backends([config.backend])
-        check_urdf(config.urdf)
+        description = {key: value for key, value in config.arm.env_kwargs().items() if key in DESCRIPTION_FLAGS}
+        check_urdf(config.urdf, description)
         check_out(args.out)
         her = "-her" if config.uses_her else ""
         name = [config.algo + her, config.preset, config.backend, f"s{config.seed}"]

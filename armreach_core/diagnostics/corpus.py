@@ -1,9 +1,14 @@
 """The corpus: public arm descriptions nobody here wrote, that every arm-level promise is tested on.
 
 One list, one line per arm. The descriptions come from package registries, with their
-meshes: ``example-robot-data`` (PyPI; installed by ``make install``) and ``pybullet_data``
-(installed with PyBullet). Nothing here is tuned to an arm: each line says only where the
-URDF is. An arm whose package is not installed is reported as missing, never downloaded.
+meshes, as published: ``example-robot-data`` (PyPI), ``pybullet_data`` (installed with
+PyBullet), ``rtb-data`` (PyPI, the Robotics Toolbox's data: ROS-Industrial KUKA and ABB
+xacro descriptions, STL/DAE meshes) and ``dexmate-urdf`` (PyPI: glTF/GLB visual meshes).
+``make install`` installs them all. Nothing here is tuned to an arm: each line says where
+the description is, its format, and what a user must say about it: where the ROS packages
+it names live (``package_dirs``), which end is the arm's when a robot has several, and a
+home when armreach finds none (reported). An arm whose package is not installed is
+reported as missing, never downloaded.
 """
 
 from __future__ import annotations
@@ -12,7 +17,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
+
+from armreach_core.errors import ConfigError
+from armreach_core.robot.spec import ArmSpec
 
 T = TypeVar("T")
 
@@ -20,16 +28,43 @@ T = TypeVar("T")
 SOURCES = {
     "example-robot-data": ("cmeel.prefix/share/example-robot-data/robots", "pip install example-robot-data"),
     "pybullet_data": ("", "pip install pybullet"),
+    "rtb-data": ("rtbdata/xacro", "pip install rtb-data"),
+    "dexmate-urdf": ("dexmate_urdf/robots", "pip install dexmate-urdf"),
 }
 
 
 @dataclass(frozen=True)
 class CorpusArm:
-    """One arm: a name, the package it comes from, and the URDF's path inside that package."""
+    """One arm: a name, the package it comes from, the description's path inside that package,
+    its format, and what a user must say about it (see the module docstring)."""
 
     name: str
     source: str
     relative: str
+    #: The description's format and its meshes' formats.
+    format: str = "URDF"
+    #: ROS packages it names, each as (name, folder inside the source).
+    packages: tuple[tuple[str, str], ...] = ()
+    ee_link: str | None = None
+    home: tuple[float, ...] | None = None
+
+    def options(self) -> dict[str, Any]:
+        """The env keyword arguments this arm needs besides ``urdf`` (empty for most)."""
+        root = _source_root(self.source)
+        out: dict[str, Any] = {}
+        if self.packages and root is not None:
+            out["package_dirs"] = {name: str(root / folder) for name, folder in self.packages}
+        if self.ee_link is not None:
+            out["ee_link"] = self.ee_link
+        if self.home is not None:
+            out["home"] = self.home
+        return out
+
+    def spec(self) -> ArmSpec:
+        """The arm as an :class:`~armreach_core.robot.spec.ArmSpec` (its package must be installed)."""
+        if self.path is None:
+            raise ConfigError(f"corpus arm {self.name!r} is not installed; {self.install}")
+        return ArmSpec.create(self.path, **self.options())
 
     @property
     def path(self) -> Path | None:
@@ -60,6 +95,40 @@ CORPUS: tuple[CorpusArm, ...] = (
     CorpusArm("kuka-iiwa", "pybullet_data", "kuka_iiwa/model.urdf"),
     CorpusArm("franka-panda", "pybullet_data", "franka_panda/panda.urdf"),
     CorpusArm("xarm6", "pybullet_data", "xarm/xarm6_robot.urdf"),
+    # ROS-Industrial descriptions as xacro: $(find NAME_support) and package://NAME_support/ name
+    # folders called otherwise (kuka_kr16/ holds kuka_kr16_support), with no package.xml
+    CorpusArm(
+        "kuka-kr16",
+        "rtb-data",
+        "kuka_description/kuka_kr16/urdf/kr16_2.xacro",
+        "xacro, STL/DAE meshes",
+        (("kuka_kr16_support", "kuka_description/kuka_kr16"), ("kuka_resources", "kuka_description/kuka_resources")),
+    ),
+    CorpusArm(
+        "kuka-kr210",
+        "rtb-data",
+        "kuka_description/kuka_kr210/urdf/kr210l150.xacro",
+        "xacro (ROS 1 style), STL/DAE meshes",
+        (("kuka_kr210_support", "kuka_description/kuka_kr210"), ("kuka_resources", "kuka_description/kuka_resources")),
+    ),
+    CorpusArm(
+        "abb-irb140",
+        "rtb-data",
+        "abb_irb140_description/urdf/irb140.xacro",
+        "xacro, STL/DAE meshes",
+        (("abb_irb140", "abb_irb140_description"),),
+    ),
+    # a two-armed upper body with glTF (.glb) visual meshes; its left hand is the arm's end, and
+    # armreach's home search finds no pose, so the URDF's zero pose is given
+    CorpusArm(
+        "vega-1u-left",
+        "dexmate-urdf",
+        "humanoid/vega_1u/vega_1u.urdf",
+        "URDF, GLB visual and OBJ collision meshes",
+        (("vega_1", "humanoid/vega_1"),),
+        ee_link="L_ee",
+        home=(0.0,) * 9,
+    ),
 )
 
 
@@ -80,8 +149,6 @@ def _source_root(source: str) -> Path | None:
 
 def corpus_arm(name: str) -> CorpusArm:
     """The corpus arm called ``name`` (a :class:`~armreach_core.errors.ConfigError` names the others)."""
-    from armreach_core.errors import ConfigError
-
     for arm in CORPUS:
         if arm.name == name:
             return arm

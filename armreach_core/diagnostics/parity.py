@@ -143,7 +143,9 @@ def run_parity_corpus(
     """
 
     def one(arm: CorpusArm, urdf: Path) -> dict[str, Any]:
-        report = run_parity(backends, str(urdf), steps=steps, configs=configs, seed=seed)
+        options = arm.options()
+        ee_link = options.pop("ee_link", None)
+        report = run_parity(backends, str(urdf), ee_link, steps=steps, configs=configs, seed=seed, env_kwargs=options)
         save_report(report, out / arm.name, log)
         failures = report.failures()
         log(f"{arm.name}: {'pass' if not failures else 'fail: ' + '; '.join(failures)}")

@@ -315,7 +315,7 @@ def inspect_corpus(
         started = time.perf_counter()
         report = inspect_robot(
             str(urdf),
-            env_kwargs=env_kwargs,
+            env_kwargs={**arm.options(), **dict(env_kwargs or {})},
             backends=backends,
             steps=steps,
             ik_episodes=ik_episodes,

@@ -178,6 +178,9 @@ class RunConfig:
             env.get("home"),
             base_position=env.get("base_position"),
             base_orientation=env.get("base_orientation"),
+            package_dirs=env.get("package_dirs"),
+            xacro_args=env.get("xacro_args"),
+            allow_xacro_env=env.get("allow_xacro_env"),
         )
 
     def with_settings(self, **changes: Any) -> RunConfig:
@@ -253,13 +256,17 @@ def resolve_config(
     Checked here, before anything is written: seed, env count, thread count, HER's
     needs. PPO's total is rounded up to whole rollouts (``n_steps × n_envs``), which is
     what SB3 trains, so the recorded count is the true one. ``placement`` (``home``,
-    ``base_position``, ``base_orientation``) overrides the preset's ``env`` block.
+    ``base_position``, ``base_orientation``, and the description's ``package_dirs``,
+    ``xacro_args``, ``allow_xacro_env``) overrides the preset's ``env`` block.
     """
     loaded = load_preset(preset)
     settings = loaded.get(task, algo)
     if placement:
         env = dict(settings.get("env", {}))
-        env.update({key: list(value) for key, value in placement.items() if value is not None})
+        env.update(
+            {key: dict(value) if isinstance(value, Mapping) else value if isinstance(value, bool) else list(value)
+             for key, value in placement.items() if value is not None}
+        )  # fmt: skip
         settings["env"] = validate_settings(algo, {"env": env}, "arm flags")["env"]
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError(f"--seed must be a non-negative integer, got {seed!r}")

@@ -98,6 +98,15 @@ def _section(schema: Mapping[str, Any]) -> Check:
     return check
 
 
+def _names_to_strings(key: str, value: Any) -> dict[str, str]:
+    """A mapping of names to strings (``package_dirs``, ``xacro_args``)."""
+    if not isinstance(value, dict) or not all(isinstance(k, str) and k for k in value):
+        raise ConfigError(f"{key}: expected a mapping of names to values, got {value!r}")
+    if any(isinstance(v, (dict, list)) or v is None for v in value.values()):
+        raise ConfigError(f"{key}: each value must be a string or a number, got {value!r}")
+    return {k: str(v) for k, v in value.items()}
+
+
 def _randomize(key: str, value: Any) -> dict[str, Any]:
     """Domain randomization: ``{mass: [0.8, 1.2], action_noise: 0.05, ...}`` (see armreach_core.perturb)."""
     from armreach_core.perturb import Randomization
@@ -118,6 +127,10 @@ ENV_SCHEMA: dict[str, Check] = {
     "home": _float_list(None),
     "base_position": _float_list(3),
     "base_orientation": _float_list(4),
+    # how a xacro description is expanded and where its ROS packages are (docs/your-arm.md)
+    "package_dirs": _names_to_strings,
+    "xacro_args": _names_to_strings,
+    "allow_xacro_env": _bool,
     # a perturbation drawn per training episode (domain randomization)
     "randomize": _randomize,
 }

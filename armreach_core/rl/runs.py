@@ -3,6 +3,7 @@
 Layout of ``runs/<name>/``::
 
     config.yaml        the resolved settings (what `--resume` and `evaluate` read back)
+    arm.urdf           for an arm described by xacro: the URDF it expanded to
     command.txt        the command line that created the run (and each resume)
     environment.json   Python, package and engine versions, and the loaded plugins
     monitor/           one log per training env, a row per episode (reward, length, time, success),
@@ -46,6 +47,8 @@ from armreach_core.rl.config import RunConfig
 from armreach_core.rl.monitor import MONITOR_DIR, monitor_paths
 
 CONFIG = "config.yaml"
+#: The URDF a xacro arm expanded to (written beside ``config.yaml`` for xacro arms only).
+ARM_URDF = "arm.urdf"
 COMMAND = "command.txt"
 ENVIRONMENT = "environment.json"
 #: What the run's demonstration buffer holds (preset key ``demonstrations``): episodes, steps, success rate.
@@ -172,8 +175,18 @@ def write_yaml(path: str | os.PathLike[str], data: dict[str, Any]) -> None:
 
 
 def write_config(run_dir: str | os.PathLike[str], config: RunConfig) -> None:
-    """Write ``config.yaml`` (atomically)."""
+    """Write ``config.yaml`` (atomically) and, for an arm described by a xacro file, the URDF it
+    expanded to (``arm.urdf``, meshes as absolute paths), so that the run can be reproduced."""
     write_yaml(Path(run_dir) / CONFIG, config.to_dict())
+    arm = config.arm
+    if arm.urdf is None or not Path(arm.urdf).is_file():
+        return
+    from armreach_core.robot.xacro_sandbox import is_xacro
+
+    if is_xacro(Path(arm.urdf), Path(arm.urdf).read_bytes()):
+        from armreach_core.robot.factory import build_robot
+
+        atomic_write_text(Path(run_dir) / ARM_URDF, build_robot(arm).parsed.resolved_xml.decode("utf-8"))
 
 
 def read_config(run_dir: str | os.PathLike[str]) -> RunConfig:

@@ -38,7 +38,11 @@ __all__ = [
 #: Keys a sweep spec may have.
 SPEC_KEYS = ("name", "algos", "seeds", "arms", "backends", "preset", "task", "steps", "episodes", "overrides", "cpus")
 #: Keys an arm entry of a spec may have (the ARM FLAGS of ``armreach train``).
-SWEEP_ARM_KEYS = ("urdf", "ee_link", "home", "base_position", "base_orientation")
+SWEEP_ARM_KEYS = (
+    "urdf", "ee_link", "home", "base_position", "base_orientation", "package_dirs", "xacro_args", "allow_xacro_env"
+)  # fmt: skip
+#: The arm keys that describe how its description is read (a xacro's arguments, where its packages are).
+_DESCRIPTION = ("package_dirs", "xacro_args", "allow_xacro_env")
 #: The arm entries whose values are vectors of numbers.
 _VECTORS = ("home", "base_position", "base_orientation")
 
@@ -63,7 +67,13 @@ class SweepArm:
 
     def placement(self) -> dict[str, Any]:
         """The ``placement`` of :func:`~armreach_core.rl.config.resolve_config`: what the entry gives, else None."""
-        return {"home": self.spec.home, "base_position": self.spec.base_position, "base_orientation": self.orientation}
+        description = {key: value for key, value in self.spec.env_kwargs().items() if key in _DESCRIPTION}
+        return {
+            "home": self.spec.home,
+            "base_position": self.spec.base_position,
+            "base_orientation": self.orientation,
+            **description,
+        }
 
     def record(self) -> dict[str, Any]:
         """The arm as a sweep's ``spec.json`` records it."""
@@ -74,18 +84,22 @@ class SweepArm:
 BUNDLED_ARM = SweepArm(DEFAULT_ROBOT)
 
 
-def resolve_arm_urdf(urdf: str | None, where: str) -> tuple[str, str | None]:
-    """(label, path) of an arm: ``None``/``ar6`` is the bundled arm, a corpus name its URDF, else a path."""
+def resolve_arm_urdf(
+    urdf: str | None, where: str, description: Mapping[str, Any] | None = None
+) -> tuple[str, str | None, dict[str, Any]]:
+    """(label, path, options) of an arm: ``None``/``ar6`` is the bundled arm, a corpus name its
+    description and the options it needs (:meth:`~armreach_core.diagnostics.corpus.CorpusArm.options`),
+    else a path, read with ``description`` (``package_dirs``, ``xacro_args``, ``allow_xacro_env``)."""
     from armreach_core.diagnostics.corpus import CORPUS
 
     if urdf is None or urdf == DEFAULT_ROBOT:
-        return DEFAULT_ROBOT, None
+        return DEFAULT_ROBOT, None, {}
     names = {arm.name: arm for arm in CORPUS}
     if urdf in names:
         arm = names[urdf]
         if arm.path is None:
             raise ConfigError(f"{where}: corpus arm {urdf!r} is not installed; {arm.install}")
-        return urdf, str(arm.path)
+        return urdf, str(arm.path), arm.options()
     path = Path(urdf).expanduser()
     if not path.is_file():
         raise ConfigError(
@@ -93,8 +107,14 @@ def resolve_arm_urdf(urdf: str | None, where: str) -> tuple[str, str | None]:
         )
     from armreach_core.robot.urdf import read_urdf
 
-    read_urdf(path)  # a file that is no URDF is refused here, before any trial starts
-    return path.stem, str(path.resolve())
+    spec = ArmSpec.create(path, **dict(description or {}))
+    read_urdf(  # a file that is no URDF is refused here, before any trial starts
+        path,
+        package_dirs=dict(spec.package_dirs or ()),
+        xacro_args=dict(spec.xacro_args or ()),
+        allow_xacro_env=bool(spec.allow_xacro_env),
+    )
+    return path.stem, str(path.resolve()), {}
 
 
 def parse_arm(value: Any, where: str) -> SweepArm:
@@ -110,7 +130,11 @@ def parse_arm(value: Any, where: str) -> SweepArm:
     urdf = value.get("urdf")
     if urdf is not None and not isinstance(urdf, str):
         raise ConfigError(f"{where}.urdf: expected a corpus name or a path, got {urdf!r}")
-    label, path = resolve_arm_urdf(urdf, where)
+    given = {key: value[key] for key in _DESCRIPTION if value.get(key) is not None}
+    try:
+        label, path, options = resolve_arm_urdf(urdf, where, given)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
     vectors: dict[str, tuple[float, ...]] = {}
     for key in _VECTORS:
         raw = value.get(key)
@@ -118,16 +142,17 @@ def parse_arm(value: Any, where: str) -> SweepArm:
             if not isinstance(raw, list) or not all(isinstance(x, (int, float)) for x in raw):
                 raise ConfigError(f"{where}.{key}: expected a list of numbers, got {raw!r}")
             vectors[key] = tuple(float(x) for x in raw)
-    ee_link = value.get("ee_link")
+    ee_link = value.get("ee_link", options.get("ee_link"))
     if ee_link is not None and not isinstance(ee_link, str):
         raise ConfigError(f"{where}.ee_link: expected a link name, got {ee_link!r}")
     try:
         spec = ArmSpec.create(
             path,
             ee_link,
-            vectors.get("home"),
+            vectors.get("home", options.get("home")),
             base_position=vectors.get("base_position"),
             base_orientation=vectors.get("base_orientation"),
+            **{key: given.get(key, options.get(key)) for key in _DESCRIPTION},
         )
     except ConfigError as exc:
         raise ConfigError(f"{where}: {exc}") from None

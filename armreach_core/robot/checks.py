@@ -25,7 +25,10 @@ A zero mass, and an inertia that is positive semi-definite but singular (a zero 
 moment: a point or a rod) or breaks the triangle inequality (one moment larger than the
 other two together), are accepted and repaired by the engines: MuJoCo raises masses and
 moments to its lower bounds (``boundmass``, ``boundinertia``) and balances the moments
-(``balanceinertia``); PyBullet takes them as they are.
+(``balanceinertia``); PyBullet takes them as they are. A broken triangle inequality is
+reported (a warning on ``armreach.robot``). The tensor built from the six numbers is
+symmetric; an engine that rotates it and finds it asymmetric by rounding (PyBullet's inverse
+dynamics, on heavy links) is answered by the backend, not refused here.
 
 Extension blocks (``<gazebo>``, ``<transmission>``, ``<mujoco>``...) are not checked:
 no engine armreach drives reads them.
@@ -33,6 +36,7 @@ no engine armreach drives reads them.
 
 from __future__ import annotations
 
+import logging
 import math
 import re
 from collections.abc import Iterable
@@ -41,6 +45,8 @@ import numpy as np
 from lxml import etree
 
 from armreach_core.errors import URDFError
+
+log = logging.getLogger("armreach.robot")
 
 #: Largest magnitude accepted for a length (m), mass (kg), moment of inertia (kg·m²),
 #: angle (rad) or joint limit. Far beyond any robot, and small enough that squares and
@@ -193,6 +199,14 @@ def _check_inertial(inertial: Element) -> None:
             f"{', '.join(f'{e:.3g}' for e in eigenvalues)} kg·m²); a rigid body's moments are >= 0: "
             "fix the signs of the products (ixy, ixz, iyz) or the diagonal"
         )
+    low, mid, high = (float(e) for e in eigenvalues)
+    if high > (low + mid) * (1 + 1e-6) + 1e-12:  # accepted: MuJoCo balances it, PyBullet takes it as it is
+        log.warning(
+            "<inertia> of %s breaks the triangle inequality (principal moments %.3g, %.3g, %.3g kg·m²: the largest "
+            "exceeds the other two together), which no rigid body does; the engines will not agree on it: fix the "
+            "moments",
+            _where(inertial), low, mid, high,
+        )  # fmt: skip
 
 
 def _check_link(link: Element) -> None:

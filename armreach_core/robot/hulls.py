@@ -117,7 +117,8 @@ def write_obj(mesh: Any, out: Path) -> Path:
 
 def simulation_urdf(robot: RobotModel, *, visuals: bool) -> bytes:
     """The robot's resolved URDF with collision meshes replaced by their hulls and, unless
-    ``visuals``, without ``<visual>`` elements (an env that never renders needs none)."""
+    ``visuals``, without ``<visual>`` elements (an env that never renders needs none).
+    :func:`armreach_core.robot.meshes.readable` then converts the meshes an engine cannot read."""
     root = etree.fromstring(robot.parsed.resolved_xml)
     for collision in root.iter("collision"):
         for mesh in collision.iter("mesh"):

@@ -18,6 +18,7 @@ them follow their master.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 
 import numpy.typing as npt
 
@@ -48,6 +49,9 @@ class RobotModel(ArmKinematics):
             raised above it when no pose keeps the arm above the ground (logged).
         base_orientation: the root link's orientation, a quaternion ``(w, x, y, z)``
             (normalized here); default no rotation. Kinematics are in the world frame.
+        package_dirs, xacro_args, allow_xacro_env: where ROS packages live, a xacro file's
+            arguments, and whether it may read the environment (see
+            :func:`armreach_core.robot.urdf.read_urdf`).
 
     Attributes:
         home: the home pose (read-only array); everything else as
@@ -68,9 +72,18 @@ class RobotModel(ArmKinematics):
         allow_external_meshes: bool | None = None,
         base_position: npt.ArrayLike | None = None,
         base_orientation: npt.ArrayLike | None = None,
+        package_dirs: Mapping[str, str] | None = None,
+        xacro_args: Mapping[str, str] | None = None,
+        allow_xacro_env: bool = False,
     ) -> None:
         position, orientation = base_pose(base_position, base_orientation)
-        parsed = read_urdf(urdf, allow_external_meshes=allow_external_meshes)
+        parsed = read_urdf(
+            urdf,
+            allow_external_meshes=allow_external_meshes,
+            package_dirs=package_dirs,
+            xacro_args=xacro_args,
+            allow_xacro_env=allow_xacro_env,
+        )
         self._build(parsed, ee_link, tool_joints, position, orientation)
         placed, q = place(self, home, base_given=base_position is not None)
         if placed != position:  # the base was raised: the same arm, placed higher

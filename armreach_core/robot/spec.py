@@ -23,7 +23,7 @@ import numpy.typing as npt
 from armreach_core.errors import ConfigError
 from armreach_core.robot.placement import base_pose
 
-__all__ = ["ARM_KEYS", "ArmSpec"]
+__all__ = ["ARM_KEYS", "PAIR_KEYS", "ArmSpec"]
 
 #: The keys of an arm in a mapping (a sweep's ``arms:`` entry, a run's ``arm:`` record).
 ARM_KEYS = (
@@ -35,7 +35,12 @@ ARM_KEYS = (
     "base_position",
     "base_orientation",
     "allow_external_meshes",
+    "package_dirs",
+    "xacro_args",
+    "allow_xacro_env",
 )
+#: The keys whose value is a mapping of names to strings (kept as sorted pairs, so a spec hashes).
+PAIR_KEYS = ("package_dirs", "xacro_args")
 
 
 @dataclass(frozen=True)
@@ -54,6 +59,11 @@ class ArmSpec:
         base_orientation: the root link's orientation as a unit quaternion ``(w, x, y, z)``.
         allow_external_meshes: accept meshes outside the URDF's folder or package
             (``None``: the ``ARMREACH_ALLOW_EXTERNAL_MESHES`` environment variable).
+        package_dirs: where ROS packages live, ``(name, absolute folder)`` pairs sorted by name
+            (``$(find NAME)``, ``package://NAME/...``); ``None``: only the URDF's own package
+            and ``ROS_PACKAGE_PATH`` (:mod:`armreach_core.robot.packages`).
+        xacro_args: a xacro file's arguments, ``(name, value)`` pairs sorted by name.
+        allow_xacro_env: let a xacro file read environment variables (``$(env ...)``).
     """
 
     urdf: str | None = None
@@ -64,6 +74,9 @@ class ArmSpec:
     base_position: tuple[float, float, float] | None = None
     base_orientation: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
     allow_external_meshes: bool | None = None
+    package_dirs: tuple[tuple[str, str], ...] | None = None
+    xacro_args: tuple[tuple[str, str], ...] | None = None
+    allow_xacro_env: bool | None = None
 
     @classmethod
     def create(
@@ -77,6 +90,9 @@ class ArmSpec:
         base_position: npt.ArrayLike | None = None,
         base_orientation: npt.ArrayLike | None = None,
         allow_external_meshes: bool | None = None,
+        package_dirs: Mapping[str, str | os.PathLike[str]] | None = None,
+        xacro_args: Mapping[str, Any] | None = None,
+        allow_xacro_env: bool | None = None,
     ) -> ArmSpec:
         """A checked spec: types and shapes validated, the path made absolute, the quaternion normalized.
 
@@ -115,6 +131,8 @@ class ArmSpec:
         position, orientation = base_pose(base_position, base_orientation)
         if allow_external_meshes is not None and not isinstance(allow_external_meshes, bool):
             raise ConfigError(f"allow_external_meshes={allow_external_meshes!r} must be true or false")
+        if allow_xacro_env is not None and not isinstance(allow_xacro_env, bool):
+            raise ConfigError(f"allow_xacro_env={allow_xacro_env!r} must be true or false")
         return cls(
             urdf=None if path is None else str(path),
             robot=robot,
@@ -124,6 +142,9 @@ class ArmSpec:
             base_position=None if base_position is None else position,
             base_orientation=orientation,
             allow_external_meshes=allow_external_meshes,
+            package_dirs=_pairs("package_dirs", package_dirs, folders=True),
+            xacro_args=_pairs("xacro_args", xacro_args),
+            allow_xacro_env=allow_xacro_env,
         )
 
     @classmethod
@@ -153,6 +174,9 @@ class ArmSpec:
         for key, value in asdict(self).items():
             if value is None or (key == "base_orientation" and value == (1.0, 0.0, 0.0, 0.0)):
                 continue
+            if key in PAIR_KEYS:
+                out[key] = {name: text for name, text in value}
+                continue
             out[key] = list(value) if isinstance(value, tuple) else value
         return out
 
@@ -169,3 +193,29 @@ class ArmSpec:
             home=self.home if self.home is not None else defaults.home,
             tool_joints=self.tool_joints if self.tool_joints is not None else defaults.tool_joints,
         )
+
+
+def _pairs(key: str, value: Any, *, folders: bool = False) -> tuple[tuple[str, str], ...] | None:
+    """A mapping of names to strings (or to folders, made absolute) as sorted pairs; ``None`` stays ``None``."""
+    if value is None:
+        return None
+    if isinstance(value, tuple) and all(isinstance(pair, tuple) and len(pair) == 2 for pair in value):
+        value = dict(value)  # the spec's own form
+    if not isinstance(value, Mapping):
+        raise ConfigError(f"{key}={value!r} must be a mapping of names to {'folders' if folders else 'values'}")
+    pairs = []
+    for name, text in value.items():
+        if not isinstance(name, str) or not name.strip():
+            raise ConfigError(f"{key}: {name!r} must be a non-empty name")
+        if folders:
+            if not isinstance(text, (str, os.PathLike)) or not str(text):
+                raise ConfigError(f"{key}: {name}={text!r} must be the path of a folder")
+            path = Path(text).expanduser()
+            with contextlib.suppress(OSError, ValueError):
+                path = path.resolve()
+            pairs.append((name, str(path)))
+        else:
+            if isinstance(text, (Mapping, list, tuple)) or text is None:
+                raise ConfigError(f"{key}: {name}={text!r} must be a single value (a string or a number)")
+            pairs.append((name, str(text).lower() if isinstance(text, bool) else str(text)))
+    return tuple(sorted(pairs))

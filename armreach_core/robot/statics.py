@@ -11,6 +11,7 @@ arm) is otherwise asked to reach targets it can touch only on paper.
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -92,3 +93,43 @@ def holdable_paths(
     t = np.linspace(0.0, 1.0, points)[:, None, None]
     path = a + t * (b - a)  # (points, n, dof)
     return np.asarray(holdable(robot, path, margin).all(axis=0))
+
+
+def joint_inertias(robot: ArmKinematics, q: npt.ArrayLike, names: Sequence[str]) -> dict[str, float]:
+    """Each named movable joint's inertia about its own axis at ``q`` (kg·m², kg for a prismatic
+    joint): the diagonal of the joint-space mass matrix, from the URDF's inertials alone.
+
+    It is everything past the joint, rigid at ``q``: per link, its inertia about the axis plus
+    its mass times its centre's squared distance from the axis. A moving link without an
+    ``<inertial>`` counts as 1 kg and 1 kg·m² about every axis, as PyBullet loads it.
+    """
+    frames = robot.link_transforms(q)
+    below: dict[str, list[str]] = {}
+    for joint in robot.tree_joints:
+        below.setdefault(joint.parent, []).append(joint.child)
+    by_name = {joint.name: joint for joint in robot.tree_joints}
+    out: dict[str, float] = {}
+    for name in names:
+        joint = by_name[name]
+        frame = frames[joint.parent] @ joint.origin
+        axis, point = frame[:3, :3] @ joint.axis, frame[:3, 3]
+        total, stack = 0.0, [joint.child]
+        while stack:
+            link = stack.pop()
+            stack += below.get(link, [])
+            inertial = robot.parsed.model.link_map[link].inertial
+            if inertial is None:
+                mass, tensor, origin = 1.0, np.eye(3), np.eye(4)
+            else:
+                mass = 0.0 if inertial.mass is None else float(inertial.mass)
+                tensor = np.zeros((3, 3)) if inertial.inertia is None else np.asarray(inertial.inertia, float)
+                origin = np.eye(4) if inertial.origin is None else np.asarray(inertial.origin, float)
+            placed = frames[link] @ origin
+            if joint.kind == "prismatic":
+                total += mass
+                continue
+            rotation = placed[:3, :3]
+            lever = np.cross(axis, placed[:3, 3] - point)
+            total += float(axis @ rotation @ tensor @ rotation.T @ axis) + mass * float(lever @ lever)
+        out[name] = total
+    return out

@@ -21,6 +21,7 @@ from __future__ import annotations
 import io
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +30,8 @@ from lxml import etree
 
 from armreach_core.errors import URDFError
 from armreach_core.robot.checks import check_tree
+from armreach_core.robot.packages import ROS_PACKAGE_PATH, Packages
+from armreach_core.robot.xacro_sandbox import is_xacro, process_xacro
 
 #: Largest URDF file accepted, in bytes. Real robot descriptions are far smaller.
 MAX_URDF_BYTES = 16 * 1024 * 1024
@@ -37,8 +40,6 @@ MAX_URDF_BYTES = 16 * 1024 * 1024
 MAX_LINE_BYTES = 8191
 #: Set to 1 to let URDFs use meshes outside their own folder or package (see :func:`resolve_mesh_path`).
 ALLOW_EXTERNAL_ENV = "ARMREACH_ALLOW_EXTERNAL_MESHES"
-#: Folders whose parent is taken as the package root of a URDF inside them (ROS layout).
-PACKAGE_SUBFOLDERS = ("urdf", "robots")
 
 _DTD_PATTERN = re.compile(rb"<!\s*(DOCTYPE|ENTITY)", re.IGNORECASE)
 
@@ -71,25 +72,17 @@ def allow_external_meshes_default() -> bool:
     return os.environ.get(ALLOW_EXTERNAL_ENV, "").strip().lower() in ("1", "true", "yes", "on")
 
 
-def mesh_roots(urdf_dir: Path, package: str | None = None) -> list[Path]:
+def mesh_roots(urdf_dir: Path, package: str | None = None, packages: Packages | None = None) -> list[Path]:
     """The folders a URDF in ``urdf_dir`` may take files from, without opting in.
 
     The URDF's own folder; the ROS package it lives in: the nearest folder at or above it
     holding a ``package.xml``, or its parent when the URDF sits in a ``urdf/`` or
-    ``robots/`` folder (the usual ``urdf/`` and ``meshes/`` siblings); and, for
-    ``package://PKG/...``, the folder named ``PKG`` at or above the URDF.
+    ``robots/`` folder (the usual ``urdf/`` and ``meshes/`` siblings); the packages the
+    user named or put on ``ROS_PACKAGE_PATH`` (:class:`~armreach_core.robot.packages.Packages`);
+    and, for ``package://PKG/...``, the folder of ``PKG``.
     """
-    urdf_dir = urdf_dir.resolve()
-    roots = [urdf_dir]
-    for folder in (urdf_dir, *urdf_dir.parents):
-        if (folder / "package.xml").is_file():
-            roots.append(folder)
-            break
-    if urdf_dir.name in PACKAGE_SUBFOLDERS:
-        roots.append(urdf_dir.parent)
-    if package:
-        roots += [folder for folder in (urdf_dir, *urdf_dir.parents) if folder.name == package]
-    return list(dict.fromkeys(roots))
+    packages = packages or Packages.of(urdf_dir)
+    return packages.roots(*([package] if package else []))
 
 
 def _is_file(path: Path) -> bool:
@@ -104,21 +97,28 @@ def _inside(path: Path, roots: list[Path]) -> bool:
     return any(path == root or path.is_relative_to(root) for root in roots)
 
 
-def _find(filename: str, urdf_dir: Path, allow_external: bool, what: str) -> tuple[Path | None, list[Path]]:
+def _find(
+    filename: str, urdf_dir: Path, allow_external: bool, what: str, packages: Packages | None = None
+) -> tuple[Path | None, list[Path]]:
     """The file a reference names (``None`` if none exists) and the places looked in."""
+    packages = packages or Packages.of(urdf_dir)
     candidates: list[Path] = []
     package: str | None = None
     if filename.startswith("package://"):
         rest = filename[len("package://") :]
         package, _, pkg_relative = rest.partition("/")
-        for folder in (urdf_dir, *urdf_dir.parents):
-            candidates.append(folder / rest)
-        candidates += [root / pkg_relative for root in (urdf_dir, *mesh_roots(urdf_dir)[1:]) if pkg_relative]
+        folder = packages.find(package)
+        if folder is not None and pkg_relative:
+            candidates.append(folder / pkg_relative)
+        for above in (urdf_dir, *urdf_dir.parents):
+            candidates.append(above / rest)
+        own = packages.own
+        candidates += [root / pkg_relative for root in (urdf_dir, *([own] if own else [])) if pkg_relative]
     else:
         plain = filename[len("file://") :] if filename.startswith("file://") else filename
         path = Path(plain)
         candidates.append(path if path.is_absolute() else urdf_dir / path)
-    roots = mesh_roots(urdf_dir, package)
+    roots = mesh_roots(urdf_dir, package, packages)
     outside: Path | None = None
     for candidate in candidates:
         if _is_file(candidate):
@@ -130,18 +130,22 @@ def _find(filename: str, urdf_dir: Path, allow_external: bool, what: str) -> tup
         raise URDFError(
             f"{what} {filename!r} referenced by the URDF is {str(outside)!r}, outside the robot's folder "
             f"({', '.join(str(r) for r in roots)}); armreach does not read files outside a URDF's folder or "
-            f"package unless asked to: move the {what} inside, or opt in with allow_external_meshes=True "
+            f"package unless asked to: name its package with package_dirs={{NAME: PATH}} (--package-dir NAME=PATH), "
+            f"move the {what} inside, or opt in with allow_external_meshes=True "
             f"(or {ALLOW_EXTERNAL_ENV}=1) if you trust this URDF"
         )
     return None, candidates
 
 
-def resolve_mesh_path(filename: str, urdf_dir: Path, *, allow_external: bool = False) -> Path:
+def resolve_mesh_path(
+    filename: str, urdf_dir: Path, *, allow_external: bool = False, packages: Packages | None = None
+) -> Path:
     """Map a mesh reference of a URDF to the file it names.
 
-    ``package://PKG/rest`` is looked up as ``PKG/rest`` in the URDF's folder and each
-    of its parents, then as ``rest`` in the URDF's folder and its package root; ``file://``
-    is stripped; relative paths are relative to the URDF's folder.
+    ``package://PKG/rest`` is looked up as ``rest`` in the folder of package ``PKG``
+    (:meth:`~armreach_core.robot.packages.Packages.find`), then as ``PKG/rest`` in the URDF's
+    folder and each of its parents, then as ``rest`` in the URDF's folder and its package
+    root; ``file://`` is stripped; relative paths are relative to the URDF's folder.
 
     Unless ``allow_external``, the file (symbolic links followed) must lie inside one of
     :func:`mesh_roots`: a URDF from elsewhere must not make armreach read, say,
@@ -150,12 +154,20 @@ def resolve_mesh_path(filename: str, urdf_dir: Path, *, allow_external: bool = F
     Raises:
         URDFError: no such file exists, or it lies outside the robot's folder.
     """
-    found, candidates = _find(filename, urdf_dir, allow_external, "mesh")
+    packages = packages or Packages.of(urdf_dir)
+    found, candidates = _find(filename, urdf_dir, allow_external, "mesh", packages)
     if found is None:
+        package = filename[len("package://") :].partition("/")[0] if filename.startswith("package://") else None
+        fix = "ship the mesh beside the URDF or fix the path"
+        if package is not None and packages.find(package) is None:
+            fix = (
+                f"no package {package!r} is known (known: {', '.join(packages.known()) or 'none'}): say where it is "
+                f"with package_dirs={{{package!r}: PATH}} (--package-dir {package}=PATH) or {ROS_PACKAGE_PATH}, "
+                "or fix the path"
+            )
         raise URDFError(
             f"mesh file {filename!r} referenced by the URDF was not found (looked in "
-            f"{', '.join(str(c) for c in candidates[:3])}{'...' if len(candidates) > 3 else ''}); "
-            "ship the mesh beside the URDF or fix the path"
+            f"{', '.join(str(c) for c in candidates[:3])}{'...' if len(candidates) > 3 else ''}); {fix}"
         )
     return found
 
@@ -182,13 +194,24 @@ def _laid_out(root: etree._Element, urdf_path: Path) -> bytes:
     return text
 
 
-def read_urdf(path: str | os.PathLike[str], *, allow_external_meshes: bool | None = None) -> ParsedURDF:
-    """Read and check a URDF file.
+def read_urdf(
+    path: str | os.PathLike[str],
+    *,
+    allow_external_meshes: bool | None = None,
+    package_dirs: Mapping[str, str] | None = None,
+    xacro_args: Mapping[str, str] | None = None,
+    allow_xacro_env: bool = False,
+) -> ParsedURDF:
+    """Read and check a URDF file, or a xacro file (processed first: :mod:`armreach_core.robot.xacro_sandbox`).
 
     Args:
-        path: the URDF file.
+        path: the URDF or xacro file.
         allow_external_meshes: accept meshes outside the URDF's folder or package
             (default: the ``ARMREACH_ALLOW_EXTERNAL_MESHES`` environment variable, else no).
+        package_dirs: where ROS packages live, name -> folder (``$(find NAME)``,
+            ``package://NAME/...``; :class:`~armreach_core.robot.packages.Packages`).
+        xacro_args: a xacro file's arguments (``<xacro:arg>``), name -> value.
+        allow_xacro_env: let a xacro file read environment variables (``$(env ...)``, ``$(optenv ...)``).
 
     Raises:
         URDFError: the file is missing, too large, declares a DTD or entities, is not
@@ -214,6 +237,16 @@ def read_urdf(path: str | os.PathLike[str], *, allow_external_meshes: bool | Non
         raise URDFError(f"URDF file {str(urdf_path)!r} grew while being read, {too_big}")
     if _DTD_PATTERN.search(data):
         raise _dtd_error(urdf_path)
+    urdf_dir = urdf_path.resolve().parent
+    packages = Packages.of(urdf_dir, package_dirs)
+    if is_xacro(urdf_path, data):
+        data = process_xacro(urdf_path, xacro_args or {}, packages, allow_env=allow_xacro_env)
+        if _DTD_PATTERN.search(data):
+            raise _dtd_error(urdf_path)
+    elif xacro_args:
+        raise URDFError(
+            f"xacro_args were given but {str(urdf_path)!r} is not a xacro file (no xacro markup); drop the arguments"
+        )
     try:
         root = etree.fromstring(data, parser=_safe_parser())
     except etree.XMLSyntaxError as exc:
@@ -226,7 +259,7 @@ def read_urdf(path: str | os.PathLike[str], *, allow_external_meshes: bool | Non
     if not isinstance(root.tag, str) or etree.QName(root).localname != "robot":
         raise URDFError(
             f"URDF file {str(urdf_path)!r} has root element <{root.tag}>, expected <robot>; is it a URDF? "
-            "(an SDF, MJCF or xacro file must be converted to URDF first)"
+            "(an SDF or MJCF file must be converted to URDF first)"
         )
     namespace = etree.QName(root).namespace
     if namespace is not None:
@@ -245,16 +278,16 @@ def read_urdf(path: str | os.PathLike[str], *, allow_external_meshes: bool | Non
     except URDFError as exc:
         raise URDFError(f"URDF file {str(urdf_path)!r}: {exc}") from None
 
-    urdf_dir = urdf_path.resolve().parent
     for mesh in root.iter("mesh"):
         filename = mesh.get("filename")
         if not filename:
             raise URDFError(f"URDF file {str(urdf_path)!r} has a <mesh> without a filename attribute")
-        mesh.set("filename", str(resolve_mesh_path(filename, urdf_dir, allow_external=allow_external_meshes)))
+        found = resolve_mesh_path(filename, urdf_dir, allow_external=allow_external_meshes, packages=packages)
+        mesh.set("filename", str(found))
     for texture in root.iter("texture"):  # engines that draw textures read these files too
         filename = texture.get("filename")
         if filename:
-            found, _ = _find(filename, urdf_dir, allow_external_meshes, "texture")
+            found, _ = _find(filename, urdf_dir, allow_external_meshes, "texture", packages)
             if found is not None:  # a missing texture only loses colour, as in every URDF viewer
                 texture.set("filename", str(found))
     resolved = _laid_out(root, urdf_path)

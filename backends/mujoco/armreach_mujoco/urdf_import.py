@@ -3,55 +3,26 @@
 The resolved URDF (mesh paths already absolute) gets a ``<mujoco><compiler/></mujoco>``
 block (``strippath=false``, ``discardvisual=false``, ``fusestatic=false``, so every link,
 ``tool0`` included, is a body whose frame is the link frame). Meshes MuJoCo cannot read
-(``.dae``, ``.ply``...) are converted once to ``.obj`` with trimesh into a cache folder.
+(``.dae``, ``.glb``, ``.ply``...) are converted once to ``.obj`` (:mod:`armreach_core.robot.meshes`).
 Links that move but have no ``<inertial>`` get PyBullet's default inertial (see
 :func:`spec_from_urdf`). The robot is placed at its base pose (:func:`place_base`).
 """
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from lxml import etree
 
 from armreach_core.errors import URDFError
-from armreach_core.robot.hulls import cache_dir, file_key, simulation_urdf, write_obj
+from armreach_core.robot.hulls import simulation_urdf
+from armreach_core.robot.meshes import readable
 from armreach_core.robot.model import RobotModel
 from armreach_mujoco.engine import mujoco
 
 #: Mesh formats MuJoCo reads itself; others are converted to .obj with trimesh.
 NATIVE_MESHES = (".stl", ".obj", ".msh")
-
-
-def mesh_cache_dir() -> Path:
-    """Where converted meshes are kept (``$XDG_CACHE_HOME/armreach/mujoco-meshes``)."""
-    return cache_dir("mujoco-meshes")
-
-
-def convert_mesh(path: Path) -> Path:
-    """A copy of ``path`` MuJoCo can read (.obj), converted once with trimesh and cached."""
-    out = mesh_cache_dir() / f"{path.stem}-{file_key(path)}.obj"
-    if out.is_file():
-        return out
-    import trimesh
-
-    fix = "fix the file, or convert it to .stl or .obj and point the URDF at that"
-    try:
-        mesh = trimesh.load(str(path), force="mesh")
-    except Exception as exc:
-        detail = str(exc) if type(exc).__name__ in str(exc) else f"{type(exc).__name__}: {exc}"
-        raise URDFError(
-            f"MuJoCo cannot read mesh {str(path)!r} and trimesh could not convert it ({detail}); {fix}"
-        ) from exc
-    vertices, faces = len(getattr(mesh, "vertices", ())), len(getattr(mesh, "faces", ()))
-    if faces == 0 or vertices < 4:  # MuJoCo rejects it, naming only the converted copy
-        raise URDFError(
-            f"mesh {str(path)!r} has {vertices} vertices and {faces} triangles once read by trimesh, "
-            f"and MuJoCo needs at least 4 vertices and a triangle; {fix}"
-        )
-    return write_obj(mesh, out)
 
 
 def urdf_for_mujoco(robot: RobotModel, visuals: bool = True) -> str:
@@ -60,11 +31,7 @@ def urdf_for_mujoco(robot: RobotModel, visuals: bool = True) -> str:
     Collision meshes are their convex hulls (what MuJoCo collides anyway) and, without
     ``visuals``, there are no visual meshes (:func:`armreach_core.robot.hulls.simulation_urdf`).
     """
-    root = etree.fromstring(simulation_urdf(robot, visuals=visuals))
-    for mesh in root.iter("mesh"):
-        filename = Path(mesh.get("filename", ""))
-        if filename.suffix.lower() not in NATIVE_MESHES:
-            mesh.set("filename", str(convert_mesh(filename)))
+    root = etree.fromstring(readable(simulation_urdf(robot, visuals=visuals), NATIVE_MESHES))
     for old in root.findall("mujoco"):
         root.remove(old)
     block = etree.SubElement(root, "mujoco")

@@ -8,6 +8,7 @@ import tempfile
 from armreach_core.backend import PhysicsConfig
 from armreach_core.errors import URDFError
 from armreach_core.robot.hulls import simulation_urdf
+from armreach_core.robot.meshes import readable
 from armreach_core.robot.model import RobotModel
 from armreach_pybullet.engine import engine_output_to_log, pb
 
@@ -18,7 +19,7 @@ from armreach_pybullet.engine import engine_output_to_log, pb
 #: the physics. 200 comes within 1-3 mm of 1,000 (docs/mujoco-backend.md, "Solver").
 SOLVER_ITERATIONS = 200
 GROUND_RGBA = (0.86, 0.87, 0.89, 1.0)
-#: Mesh formats PyBullet's URDF loader reads.
+#: Mesh formats PyBullet's URDF loader reads; others are converted to .obj (armreach_core.robot.meshes).
 PYBULLET_MESHES = (".obj", ".stl", ".dae")
 
 #: A body's base pose as PyBullet takes it: position, quaternion (x, y, z, w).
@@ -27,20 +28,10 @@ Pose = tuple[list[float], list[float]]
 
 def load_failure(robot: RobotModel, detail: str) -> str:
     """Why PyBullet refused a URDF that armreach's own parser accepted, and what to do."""
-    from lxml import etree
-
-    root = etree.fromstring(robot.parsed.resolved_xml)
-    unreadable = sorted(
-        {m.get("filename", "") for m in root.iter("mesh") if os.path.splitext(m.get("filename", ""))[1].lower()
-         not in PYBULLET_MESHES}
-    )  # fmt: skip
-    hint = (
-        f"PyBullet reads only {', '.join(PYBULLET_MESHES)} meshes and this URDF uses {', '.join(unreadable)}: "
-        "convert them (e.g. with trimesh) and point the URDF at the copies"
-        if unreadable
-        else "check the URDF with PyBullet's own loader for the details"
+    return (
+        f"PyBullet cannot load the arm {robot.name!r} ({robot.urdf_path}): {detail}; check the meshes and "
+        "elements it names (every mesh was handed over as .obj, .stl or .dae), or try the mujoco backend"
     )
-    return f"PyBullet cannot load {robot.urdf_path} ({detail}); {hint}"
 
 
 def build_world(cid: int, physics: PhysicsConfig) -> None:
@@ -72,7 +63,7 @@ def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int
     with tempfile.TemporaryDirectory(prefix="armreach-") as tmp:
         path = os.path.join(tmp, "robot.urdf")
         with open(path, "wb") as handle:
-            handle.write(simulation_urdf(robot, visuals=physics.visuals))
+            handle.write(readable(simulation_urdf(robot, visuals=physics.visuals), PYBULLET_MESHES))
         try:
             with engine_output_to_log():
                 body = pb.loadURDF(

@@ -9,6 +9,7 @@ times the multiplier plus the offset, as its target before every physics step.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,7 +17,10 @@ import numpy as np
 from armreach_core.backend import stable_damping
 from armreach_core.errors import ArmReachError
 from armreach_core.robot.model import FloatArray, RobotModel
-from armreach_pybullet.engine import pb
+from armreach_core.robot.statics import joint_inertias
+from armreach_pybullet.engine import engine_output_to_log, pb
+
+log = logging.getLogger("armreach.pybullet")
 
 POSITION_GAIN = 0.2
 VELOCITY_GAIN = 1.0
@@ -148,10 +152,18 @@ def bound_damping(cid: int, body: int, robot: RobotModel, motors: Motors, timest
     home = dict(zip(robot.joint_names, robot.home, strict=True))
     home.update(zip((j.name for j in robot.held_joints), robot.held_positions(robot.home), strict=True))
     names = [info[1].decode() for info in infos]
-    mass = pb.calculateMassMatrix(body, [float(home[names[i]]) for i in movable], physicsClientId=cid)
     with_motor = [i for i in (*motors.joints, *motors.held) if i not in motors.followers]
     urdf = [infos[i][6] for i in with_motor]
-    inertia = [mass[movable.index(i)][movable.index(i)] for i in with_motor]
+    try:
+        with engine_output_to_log():
+            mass = pb.calculateMassMatrix(body, [float(home[names[i]]) for i in movable], physicsClientId=cid)
+        inertia = [mass[movable.index(i)][movable.index(i)] for i in with_motor]
+    except (pb.error, SystemError) as exc:
+        # Bullet's inverse dynamics refuses a link whose inertia about its joint is asymmetric
+        # by rounding (1e-15 absolute: a heavy link whose centre of mass is off two axes)
+        log.info("PyBullet's mass matrix of %r failed (%s); joint inertias taken from the URDF", robot.name, exc)
+        inertias = joint_inertias(robot, robot.home, [names[i] for i in with_motor])
+        inertia = [inertias[names[i]] for i in with_motor]
     bounded = stable_damping(urdf, inertia, timestep)
     lowered: dict[str, float] = {}
     for index, value, given in zip(with_motor, bounded, urdf, strict=True):
