@@ -42,6 +42,7 @@ def markdown(report: RobotReport) -> str:
             "",
             f"- end effector: `{report.ee_link}`",
             f"- joints off the chain, held: {', '.join(report.held_joints) or 'none'}",
+            *[f"- anatomy: {decision}" for decision in report.anatomy],
             f"- home: lowest link {report.home_lowest_m:+.3f} m above the ground, dexterity {report.home_dexterity:.3f}"
             f" m/rad, self-collisions: {report.home_self_collisions or 'none'}",
             f"- reach {report.reach_m:.3f} m; targets in a ball of {report.target_radius_m:.2f} m around "

@@ -55,6 +55,7 @@ class RobotReport:
     joints: list[dict[str, Any]] = field(default_factory=list)
     held_joints: list[str] = field(default_factory=list)
     ee_link: str = ""
+    anatomy: list[str] = field(default_factory=list)
     home: list[float] = field(default_factory=list)
     home_lowest_m: float = math.nan
     home_dexterity: float = math.nan
@@ -87,6 +88,7 @@ def _robot_facts(report: RobotReport, env: ArmEnv) -> None:
         for j in robot.joints
     ]
     report.held_joints = [joint.name for joint in robot.held_joints]
+    report.anatomy = list(robot.anatomy)
     report.home = [float(v) for v in robot.home]
     facts = describe(robot, robot.home)
     report.home_lowest_m = facts["lowest_link_m"]
