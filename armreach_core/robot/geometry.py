@@ -190,3 +190,53 @@ def self_collisions(robot: ArmKinematics, q: npt.ArrayLike) -> list[tuple[str, s
             if _overlap(placed[a], placed[b]):
                 hits.append((a, b))
     return hits
+
+
+@functools.lru_cache(maxsize=32)
+def _hull_planes(robot: ArmKinematics) -> dict[str, FloatArray]:
+    """Each link's collision points as a convex hull in its own frame: facet planes (k, 4), ``n·p + d <= 0`` inside."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    planes = {}
+    for link, points in _geometry(robot).points.items():
+        try:
+            planes[link] = np.asarray(ConvexHull(points, qhull_options="QJ").equations, dtype=np.float64)
+        except (QhullError, ValueError):  # too few points for a hull: the box around them
+            low, high = points.min(axis=0), points.max(axis=0)
+            planes[link] = np.vstack([np.hstack([np.eye(3), -high[:, None]]), np.hstack([-np.eye(3), low[:, None]])])
+    return planes
+
+
+def moving_with(robot: ArmKinematics, link: str) -> frozenset[str]:
+    """``link``, the links fixed to it and every link below them: the body that moves with it, gripper included."""
+    top = link
+    parent = {j.child: j for j in robot.tree_joints}
+    while top in parent and parent[top].kind == "fixed":
+        top = parent[top].parent
+    body = {top}
+    for joint in robot.tree_joints:  # parents come first
+        if joint.parent in body:
+            body.add(joint.child)
+    return frozenset(body)
+
+
+def clearance(
+    robot: ArmKinematics, q: npt.ArrayLike, points: npt.ArrayLike, skip: frozenset[str] = frozenset()
+) -> FloatArray:
+    """How far (m) each point lies outside the links' collision hulls at ``q`` (one pose), ``skip`` aside.
+
+    Negative inside a hull. Outside, the distance to the farthest facet plane: at most the
+    true distance (the hull grown by a margin this way has its corners squared off, not
+    rounded), so ``clearance(...) > margin`` keeps at least ``margin`` from every link.
+    ``inf`` where no link has collision geometry.
+    """
+    pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    frames = robot.link_transforms(np.asarray(q, dtype=np.float64))
+    out = np.full(len(pts), np.inf)
+    for link, planes in _hull_planes(robot).items():
+        if link in skip:
+            continue
+        transform = frames[link]
+        local = (pts - transform[:3, 3]) @ transform[:3, :3]  # into the link's frame
+        out = np.minimum(out, (local @ planes[:, :3].T + planes[:, 3]).max(axis=1))
+    return out

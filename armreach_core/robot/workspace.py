@@ -1,5 +1,9 @@
 """Where the arm can reach: a voxel map built from the URDF, used to sample targets.
 
+Targets are drawn (:class:`TargetSampler`) in a ball, inside this map, above a floor and,
+unless told otherwise, clear of the arm's own links at home, so that the end effector gets
+to them without passing through the arm.
+
 The map is the set of voxels that the end effector visits over many joint
 configurations drawn uniformly inside the limits and holdable against gravity with the
 URDF's effort limits (:mod:`armreach_core.robot.statics`; for an arm that cannot hold every
@@ -18,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.errors import ConfigError
+from armreach_core.robot.geometry import clearance, moving_with
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.robot.statics import holdable, holdable_paths
 
@@ -117,18 +122,30 @@ def reachability_map(robot: RobotModel) -> ReachabilityMap:
 
 
 class TargetSampler:
-    """Uniform targets in a ball, above a floor, and inside the reachable set.
+    """Uniform targets in a ball, above a floor, inside the reachable set and clear of the arm.
 
     Args:
         robot: the arm.
         center: centre of the ball (m, world frame).
         radius: radius of the ball (m).
         min_height: lowest allowed target height (m).
+        clear_of_arm: how far (m) every target stays from the arm's own links at home (their
+            collision geometry's convex hulls, :func:`armreach_core.robot.geometry.clearance`;
+            the end effector's body and what hangs below it aside, since they go to the target):
+            the end effector gets to a target without passing through the arm. ``None``: no
+            such check (targets may lie inside the arm's links).
     """
 
     MAX_TRIES = 10_000
 
-    def __init__(self, robot: RobotModel, center: npt.ArrayLike, radius: float, min_height: float) -> None:
+    def __init__(
+        self,
+        robot: RobotModel,
+        center: npt.ArrayLike,
+        radius: float,
+        min_height: float,
+        clear_of_arm: float | None = None,
+    ) -> None:
         self.center: FloatArray = np.asarray(center, dtype=np.float64)
         if self.center.shape != (3,) or not np.all(np.isfinite(self.center)):
             raise ConfigError(f"target_center={center!r} must be three finite numbers (m)")
@@ -136,6 +153,12 @@ class TargetSampler:
             raise ConfigError(f"target_radius={radius!r} must be a positive number (m)")
         self.radius = float(radius)
         self.min_height = float(min_height)
+        if clear_of_arm is not None and not (np.isfinite(clear_of_arm) and clear_of_arm >= 0):
+            raise ConfigError(f"the targets' clearance from the arm, {clear_of_arm!r}, must be a distance >= 0 (m)")
+        self.clear_of_arm = clear_of_arm
+        self.robot = robot
+        #: The links that move with the end effector: targets may touch them at home.
+        self.end_effector_body = moving_with(robot, robot.ee_link)
         self.map = reachability_map(robot)
         inside = self.map.centers(self.center - self.radius, self.center + self.radius)
         #: Interior voxel centres that are valid targets: drawn from when rejection sampling
@@ -150,6 +173,7 @@ class TargetSampler:
         """The interior voxel centre at least ``min_height`` high nearest to ``point``, if any."""
         every = (np.argwhere(self.map.grid) + self.map.origin + 0.5) * self.map.voxel
         every = every[every[:, 2] >= self.min_height]
+        every = every[self.clear(every)]
         if not len(every):
             return None
         nearest: FloatArray = every[np.argmin(np.linalg.norm(every - np.asarray(point), axis=1))]
@@ -160,7 +184,19 @@ class TargetSampler:
         pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
         in_ball = np.linalg.norm(pts - self.center, axis=1) <= self.radius
         accepted: npt.NDArray[np.bool_] = in_ball & (pts[:, 2] >= self.min_height) & self.map.contains(pts)
+        if np.any(accepted):
+            accepted[accepted] = self.clear(pts[accepted])
         return accepted
+
+    def clear(self, points: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+        """Whether each point keeps :attr:`clear_of_arm` from the arm's links at home (all, without the check)."""
+        pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        if self.clear_of_arm is None:
+            return np.ones(len(pts), dtype=bool)
+        far: npt.NDArray[np.bool_] = (
+            clearance(self.robot, self.robot.home, pts, self.end_effector_body) > self.clear_of_arm
+        )
+        return far
 
     def sample(self, rng: np.random.Generator) -> FloatArray:
         """One target, drawn with ``rng`` only (rejection sampling)."""
