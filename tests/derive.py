@@ -72,6 +72,38 @@ class Description:
         self.root.append(joint)
         return self
 
+    def scale(self, k: float) -> Description:
+        """The same arm ``k`` times as large: lengths times k, masses k**3, inertias k**5, efforts k**4."""
+
+        def times(text: str | None, factor: float) -> str:
+            return " ".join(repr(float(v) * factor) for v in (text or "1 1 1").split())
+
+        for element in self.root.iter():
+            if element.tag == "origin" and element.get("xyz") is not None:
+                element.set("xyz", times(element.get("xyz"), k))
+            elif element.tag == "box":
+                element.set("size", times(element.get("size"), k))
+            elif element.tag in ("cylinder", "sphere", "capsule"):
+                for key in ("radius", "length"):
+                    if element.get(key) is not None:
+                        element.set(key, times(element.get(key), k))
+            elif element.tag == "mesh":
+                element.set("scale", times(element.get("scale"), k))
+            elif element.tag == "mass":
+                element.set("value", times(element.get("value"), k**3))
+            elif element.tag == "inertia":
+                for key, value in element.attrib.items():
+                    element.set(key, times(value, k**5))
+            elif element.tag == "limit" and element.get("effort") is not None:
+                element.set("effort", times(element.get("effort"), k**4))
+        for joint in self.root.iter("joint"):
+            limit = joint.find("limit")
+            if joint.get("type") == "prismatic" and limit is not None:
+                for key in ("lower", "upper"):
+                    if limit.get(key) is not None:
+                        limit.set(key, times(limit.get(key), k))
+        return self
+
     def edit(self, change: Callable[[ET.Element], None]) -> Description:
         change(self.root)
         return self

@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from armreach_core.backend import Camera
 from armreach_core.diagnostics.corpus import CorpusArm, for_each_corpus_arm
+from armreach_core.diagnostics.picture import robot_picture
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ArmReachError
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
@@ -213,23 +213,11 @@ def _engine(backend: str, env_kwargs: Mapping[str, Any], steps: int, ik_episodes
 
 
 def picture(env_kwargs: Mapping[str, Any], backend: str, path: Path) -> None:
-    """The arm at home with the target ball's centre and radius marked, framed by its reach."""
+    """Save the arm at home with its target region and joint axes, framed to fit
+    (:func:`armreach_core.diagnostics.picture.robot_picture`), as a PNG at ``path``."""
     from PIL import Image
 
-    env = ArmEnv(DEFAULT_TASK, backend=backend, render_mode="rgb_array", **env_kwargs)
-    try:
-        env.reset(seed=0)
-        sampler = env.task.sampler  # type: ignore[attr-defined]
-        reach = float(sampler.map.reach)
-        centre = tuple(float(v) for v in sampler.center)
-        env.backend.add_marker("target-region", float(sampler.radius), (0.2, 0.5, 0.9, 0.25))
-        env.backend.set_marker("target-region", np.asarray(centre))
-        env.camera = Camera(target=(centre[0] / 2, centre[1] / 2, centre[2] / 2), distance=2.6 * max(reach, 0.2))
-        frame = env.render()
-    finally:
-        env.close()
-    if frame is not None:
-        Image.fromarray(frame).save(path)
+    Image.fromarray(robot_picture(env_kwargs, backend).image).save(path)
 
 
 def inspect_robot(

@@ -240,3 +240,12 @@ def clearance(
         local = (pts - transform[:3, 3]) @ transform[:3, :3]  # into the link's frame
         out = np.minimum(out, (local @ planes[:, :3].T + planes[:, 3]).max(axis=1))
     return out
+
+
+def world_points(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:
+    """Every link's collision points and every link's origin at ``q`` (one configuration), world frame, (n, 3)."""
+    frames = robot.link_transforms(np.asarray(q, dtype=np.float64))
+    clouds = [np.array([frame[:3, 3] for frame in frames.values()])]
+    for link, points in _geometry(robot).points.items():
+        clouds.append(points @ frames[link][:3, :3].T + frames[link][:3, 3])
+    return np.vstack(clouds)
