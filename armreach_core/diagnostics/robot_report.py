@@ -67,11 +67,21 @@ class RobotReport:
     engines: list[EngineFacts] = field(default_factory=list)
     parity: dict[str, Any] = field(default_factory=dict)
     problems: list[str] = field(default_factory=list)
+    #: What the parity run found outside its tolerances (empty: it holds, or it did not run).
+    parity_failures: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
     @property
     def usable(self) -> bool:
-        return not self.problems
+        """Nothing stops the arm, and the parity run, when there was one, holds."""
+        return not self.problems and not self.parity_failures
+
+    @property
+    def verdict(self) -> str:
+        """``usable``, ``NOT usable`` or ``NOT usable: the engines disagree`` (parity alone failed)."""
+        if self.problems:
+            return "NOT usable"
+        return "NOT usable: the engines disagree" if self.parity_failures else "usable"
 
     def to_json(self) -> dict[str, Any]:
         out = asdict(self)
@@ -285,6 +295,7 @@ def inspect_robot(
             },
             "failures": parity.failures(),
         }
+        report.parity_failures = [f"parity {' vs '.join(working)}: {failure}" for failure in parity.failures()]
     return report
 
 
@@ -312,8 +323,7 @@ def inspect_corpus(
             parity_steps=parity_steps,
             seed=seed,
         )
-        verdict = "usable" if report.usable else "NOT usable"
-        log(f"{arm.name}: {verdict} ({time.perf_counter() - started:.0f} s)")
+        log(f"{arm.name}: {report.verdict} ({time.perf_counter() - started:.0f} s)")
         return report
 
     return for_each_corpus_arm(one, log=log, arms=arms)
