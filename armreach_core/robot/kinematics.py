@@ -89,6 +89,8 @@ class ArmKinematics:
         URDFError: the file cannot be used, with the reason and the fix.
     """
 
+    anatomy: tuple[str, ...]
+
     def __init__(
         self,
         parsed: ParsedURDF,
@@ -186,6 +188,9 @@ class ArmKinematics:
             )
         #: Number of actuated joints on the chain to the end effector (the arm proper).
         self.arm_dof: int = len(movable)
+        arm = f"the arm of {self.name!r}: {self.arm_dof} joints from {self.root_link!r} to {self.ee_link!r}"
+        self.anatomy = (f"{arm} ({', '.join(str(j.name) for j in movable)}), every one actuated", *self.anatomy)
+        log.info("%s", self.anatomy[0])
         if len(set(tool_joints)) != len(tool_joints):
             raise URDFError(f"tool_joints {list(tool_joints)} name a joint twice")
         tools = [tool_joint(self.name, joints, name, chain, self.ee_link) for name in tool_joints]
@@ -223,7 +228,7 @@ class ArmKinematics:
     def _choose_ee_link(self, ee_link: str | None) -> str:
         """The end effector (given or the default), setting :attr:`gripper_joints` on the way."""
         self.gripper_joints: tuple[str, ...] = ()
-        self.anatomy: tuple[str, ...] = ()
+        self.anatomy = ()
         if ee_link is not None:
             if ee_link not in self.link_names:
                 raise URDFError(
