@@ -117,3 +117,12 @@ def test_every_decision_names_its_joint_or_link_and_its_reason(tmp_path):
     names = {e.get("name") for e in tree if e.tag in ("joint", "link")}
     for line in robot.anatomy:
         assert any(f"'{name}'" in line for name in names), line
+
+
+def test_a_revolute_jaw_off_the_chain_leaves_the_wrist_beside_it_on_the_arm(tmp_path, caplog):
+    # a UR5 with an unnamed revolute part hung beside its last wrist joint, as a side jaw would be
+    ur5 = Description("ur5").add("revolute", "j_side", "wrist_2_link", "side_link", "0 0.05 0.09")
+    robot = _build(ur5.write(tmp_path), caplog)
+    assert robot.joint_names[-1] == "wrist_3_joint" and robot.dof == 6
+    assert robot.ee_link == "tool0" and [j.name for j in robot.held_joints] == ["j_side"]
+    assert "'j_side' is a finger off the chain at 'wrist_2_link': 'wrist_3_joint' moves the tool centre" in caplog.text

@@ -21,7 +21,8 @@ finger when it carries no tool centre and either mimics or is mimicked by a sibl
 prismatic joint beside another (parallel fingers), or is named as a gripper throughout. All
 fingers, or subtrees all shallower than the chain above them (the Panda's fingers): the
 gripper hangs here. Fingers beside a single other subtree hang off the chain, and the walk
-goes on into the other one.
+goes on into the other one; so does it into the one subtree whose movable joints carry the
+named tool centre (a wrist beside a jaw off the chain).
 
 The walk never stops before the first movable joint: the arm keeps at least its chain up
 to the gripper. Every movable joint below the mount is a gripper joint. Branches that are
@@ -170,9 +171,16 @@ class Tree:
         """Links below ``joint`` (its child included) whose names make them a tool centre."""
         return [str(j.child) for j in self._branch_joints(joint) if tool_centre_rank(str(j.child)) is not None]
 
-    def _coupled(self, joint: Any) -> bool:
-        """Whether a movable joint mimics another or is mimicked (a linkage of fingers)."""
-        return joint.mimic is not None or str(joint.name) in self.followers
+    def _moves_tool_centre(self, joint: Any) -> bool:
+        """Whether a movable joint at or below ``joint`` carries a tool centre the URDF names (a wrist does)."""
+        for tool in self._tool_centres_below(joint):
+            link = tool
+            while link != str(joint.parent):
+                above = self.parent_joint[link]
+                if self._moves(above):
+                    return True
+                link = str(above.parent)
+        return False
 
     def _finger(self, joint: Any, siblings: list[Any]) -> str | None:
         """Why the subtree of ``joint`` is a finger beside ``siblings``, or ``None`` if it is not one."""
@@ -256,6 +264,12 @@ class Tree:
                 why = {str(j.name): self._finger(j, branches) for j in branches}
                 others = [j for j in branches if why[str(j.name)] is None]
                 short = all(self.depth[str(j.child)] + self._moves(j) < arm for j in branches)
+                wrists = [j for j in branches if self._moves_tool_centre(j)]
+                if arm >= 1 and len(wrists) == 1:  # the one subtree whose joints move the tool centre goes on
+                    for j in branches:
+                        if j is not wrists[0]:
+                            why[str(j.name)] = why[str(j.name)] or f"{str(wrists[0].name)!r} moves the tool centre"
+                    others, short = wrists, False
                 if arm >= 1 and (not others or short):
                     self.decisions.append(
                         f"the gripper hangs from {link!r}: its subtrees "
