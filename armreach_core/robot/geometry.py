@@ -220,25 +220,32 @@ def moving_with(robot: ArmKinematics, link: str) -> frozenset[str]:
     return frozenset(body)
 
 
-def clearance(
-    robot: ArmKinematics, q: npt.ArrayLike, points: npt.ArrayLike, skip: frozenset[str] = frozenset()
-) -> FloatArray:
-    """How far (m) each point lies outside the links' collision hulls at ``q`` (one pose), ``skip`` aside.
+def hulls_at(robot: ArmKinematics, q: npt.ArrayLike, skip: frozenset[str] = frozenset()) -> tuple[FloatArray, ...]:
+    """The links' collision hulls at ``q`` (one configuration), ``skip`` aside: per link, its facet planes
+    ``(k, 4)`` in the world frame, ``n·p + d <= 0`` inside."""
+    frames = robot.link_transforms(np.asarray(q, dtype=np.float64))
+    placed = []
+    for link, planes in _hull_planes(robot).items():
+        if link in skip:
+            continue
+        rotation, origin = frames[link][:3, :3], frames[link][:3, 3]
+        normals = planes[:, :3] @ rotation.T
+        placed.append(np.column_stack([normals, planes[:, 3] - normals @ origin]))
+    return tuple(placed)
+
+
+def clearance(hulls: tuple[FloatArray, ...], points: npt.ArrayLike) -> FloatArray:
+    """How far (m) each point lies outside the hulls (:func:`hulls_at`).
 
     Negative inside a hull. Outside, the distance to the farthest facet plane: at most the
     true distance (the hull grown by a margin this way has its corners squared off, not
     rounded), so ``clearance(...) > margin`` keeps at least ``margin`` from every link.
-    ``inf`` where no link has collision geometry.
+    ``inf`` without hulls.
     """
     pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
-    frames = robot.link_transforms(np.asarray(q, dtype=np.float64))
     out = np.full(len(pts), np.inf)
-    for link, planes in _hull_planes(robot).items():
-        if link in skip:
-            continue
-        transform = frames[link]
-        local = (pts - transform[:3, 3]) @ transform[:3, :3]  # into the link's frame
-        out = np.minimum(out, (local @ planes[:, :3].T + planes[:, 3]).max(axis=1))
+    for planes in hulls:
+        out = np.minimum(out, (pts @ planes[:, :3].T + planes[:, 3]).max(axis=1))
     return out
 
 

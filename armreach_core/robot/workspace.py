@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.errors import ConfigError
-from armreach_core.robot.geometry import clearance, moving_with
+from armreach_core.robot.geometry import clearance, hulls_at, moving_with
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.robot.statics import holdable, holdable_paths
 
@@ -121,6 +121,23 @@ def reachability_map(robot: RobotModel) -> ReachabilityMap:
     return ReachabilityMap(robot)
 
 
+@functools.lru_cache(maxsize=32)
+def home_hulls(robot: RobotModel) -> tuple[FloatArray, ...]:
+    """The collision hulls (:func:`~armreach_core.robot.geometry.hulls_at`) of ``robot``'s links at home
+    that do not move with its end effector (cached)."""
+    return hulls_at(robot, robot.home, moving_with(robot, robot.ee_link))
+
+
+@functools.lru_cache(maxsize=32)
+def _clear_voxels(robot: RobotModel, margin: float) -> npt.NDArray[np.bool_]:
+    """The reachability map's interior voxels whose centres keep ``margin`` from :func:`home_hulls` (cached)."""
+    grid = reachability_map(robot).grid.copy()
+    cells = np.argwhere(grid)
+    centres = (cells + reachability_map(robot).origin + 0.5) * reachability_map(robot).voxel
+    grid[tuple(cells.T)] = clearance(home_hulls(robot), centres) > margin
+    return grid
+
+
 class TargetSampler:
     """Uniform targets in a ball, above a floor, inside the reachable set and clear of the arm.
 
@@ -157,13 +174,13 @@ class TargetSampler:
             raise ConfigError(f"the targets' clearance from the arm, {clear_of_arm!r}, must be a distance >= 0 (m)")
         self.clear_of_arm = clear_of_arm
         self.robot = robot
-        #: The links that move with the end effector: targets may touch them at home.
-        self.end_effector_body = moving_with(robot, robot.ee_link)
         self.map = reachability_map(robot)
+        #: The interior voxels whose centres are clear of the arm (all of them, without the check).
+        self.grid = self.map.grid if clear_of_arm is None else _clear_voxels(robot, float(clear_of_arm))
         inside = self.map.centers(self.center - self.radius, self.center + self.radius)
         #: Interior voxel centres that are valid targets: drawn from when rejection sampling
         #: finds nothing (a ball that barely overlaps the reachable set).
-        self.fallback: FloatArray = inside[self.accepts(inside)] if len(inside) else inside
+        self.fallback: FloatArray = inside[self._accepts_centres(inside)] if len(inside) else inside
 
     def has_targets(self) -> bool:
         """Whether any valid target exists."""
@@ -171,9 +188,8 @@ class TargetSampler:
 
     def nearest_reachable(self, point: npt.ArrayLike) -> FloatArray | None:
         """The interior voxel centre at least ``min_height`` high nearest to ``point``, if any."""
-        every = (np.argwhere(self.map.grid) + self.map.origin + 0.5) * self.map.voxel
+        every = (np.argwhere(self.grid) + self.map.origin + 0.5) * self.map.voxel
         every = every[every[:, 2] >= self.min_height]
-        every = every[self.clear(every)]
         if not len(every):
             return None
         nearest: FloatArray = every[np.argmin(np.linalg.norm(every - np.asarray(point), axis=1))]
@@ -193,10 +209,15 @@ class TargetSampler:
         pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
         if self.clear_of_arm is None:
             return np.ones(len(pts), dtype=bool)
-        far: npt.NDArray[np.bool_] = (
-            clearance(self.robot, self.robot.home, pts, self.end_effector_body) > self.clear_of_arm
-        )
+        far: npt.NDArray[np.bool_] = clearance(home_hulls(self.robot), pts) > self.clear_of_arm
         return far
+
+    def _accepts_centres(self, centres: FloatArray) -> npt.NDArray[np.bool_]:
+        """:meth:`accepts` for interior voxel centres, through the cached :attr:`grid`."""
+        in_ball = np.linalg.norm(centres - self.center, axis=1) <= self.radius
+        idx = np.floor(centres / self.map.voxel).astype(np.int64) - self.map.origin
+        accepted: npt.NDArray[np.bool_] = in_ball & (centres[:, 2] >= self.min_height) & self.grid[tuple(idx.T)]
+        return accepted
 
     def sample(self, rng: np.random.Generator) -> FloatArray:
         """One target, drawn with ``rng`` only (rejection sampling)."""
