@@ -187,7 +187,7 @@ class TargetSampler:
         return len(self.fallback) > 0
 
     def nearest_reachable(self, point: npt.ArrayLike) -> FloatArray | None:
-        """The interior voxel centre at least ``min_height`` high nearest to ``point``, if any."""
+        """The interior voxel centre, at least ``min_height`` high and clear of the arm, nearest to ``point``."""
         every = (np.argwhere(self.grid) + self.map.origin + 0.5) * self.map.voxel
         every = every[every[:, 2] >= self.min_height]
         if not len(every):
