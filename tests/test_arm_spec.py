@@ -136,7 +136,7 @@ def test_each_task_ships_its_own_zoo_hyperparameters(tmp_path: Path) -> None:
     from armreach_core.rl.zoo import hyperparams_path, task_hyperparams
 
     files = task_hyperparams()
-    assert set(yaml.safe_load(files["reach"].read_text())) == {"armreach/Reach-v0"}
+    assert set(yaml.safe_load(files["reach"].read_text())) == {"armreach/Reach-v1"}
     merged = yaml.safe_load(hyperparams_path(folder=tmp_path).read_text())
     assert set(merged) == {
         spec.env_id for name, spec in armreach_core.get_host().registry.tasks.items() if name in files

@@ -84,8 +84,11 @@ def _sunk(tmp_path, ar6_urdf):
     return sunk
 
 
-def test_an_arm_below_the_ground_gets_its_base_raised(tmp_path, ar6_urdf):
-    robot = RobotModel(_sunk(tmp_path, ar6_urdf))
+def test_an_arm_below_the_ground_gets_its_base_raised_with_a_warning(tmp_path, ar6_urdf, caplog):
+    with caplog.at_level("INFO", logger="armreach.home"):
+        robot = RobotModel(_sunk(tmp_path, ar6_urdf))
+    raised = [r for r in caplog.records if r.getMessage().startswith("raised the base of 'ar6' by 0.62 m")]
+    assert [r.levelname for r in raised] == ["WARNING"]  # as the README says
     # measured: raised 0.62 m (what its best pose lacks, plus 5 cm), its lowest link then 6 cm up
     assert robot.base_position[2] == pytest.approx(0.62, abs=0.005)
     assert describe(robot, robot.home)["lowest_link_m"] == pytest.approx(0.06, abs=0.005)

@@ -77,3 +77,19 @@ def test_arm_flags_reach_the_run_and_its_evaluation(tmp_path):
     assert summary["ended_by"]["success"] == round(2 * summary["success_rate"])
     with pytest.raises(SystemExit):  # a wrong number of values is refused by the parser
         main(["rollout", "--base-position", "0", "0"])
+
+
+def test_the_page_says_usable_only_when_the_parity_it_ran_holds(tmp_path):
+    from armreach_core.diagnostics.robot_page import markdown
+    from armreach_core.diagnostics.robot_report import RobotReport
+
+    gap = "parity pybullet vs mujoco: mujoco random (free): end-effector RMS gap 49.0 mm > 10 mm"
+    disagree = RobotReport(urdf="arm.urdf", parity={"gaps": {}}, parity_failures=[gap])
+    assert not disagree.usable and disagree.verdict == "NOT usable: the engines disagree"
+    page = markdown(disagree)
+    assert "Usable" not in page and "the parity check does not hold" in page and f"- {gap}" in page
+    assert disagree.to_json()["usable"] is False
+    holds = RobotReport(urdf="arm.urdf", parity={"gaps": {}})
+    assert holds.usable and "**Usable.** The parity check holds" in markdown(holds)
+    unchecked = markdown(RobotReport(urdf="arm.urdf"))
+    assert "**Usable.** (Parity not checked" in unchecked

@@ -29,7 +29,7 @@ def _zoo(*args: str, cwd) -> str:
     return result.stdout
 
 
-@pytest.mark.parametrize("env_id", ["armreach/Reach-v0", "armreach/Grasp-v0"])
+@pytest.mark.parametrize("env_id", ["armreach/Reach-v1", "armreach/Grasp-v0"])
 def test_rl_zoo3_trains_and_enjoys(env_id, tmp_path):
     if env_id == "armreach/Grasp-v0" and "grasp" not in armreach_core.available_tasks():
         pytest.skip("armreach-grasp is not installed")

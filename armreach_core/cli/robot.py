@@ -41,7 +41,8 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Exit 0: usable; 1: the arm was checked and cannot be used as it is (the page says why);
+    """Exit 0: usable; 1: the arm was checked and cannot be used as it is, or the engines disagree on it
+    (the page says which part);
     2: the command line is wrong (no such file, not a URDF, an unknown backend), with nothing written."""
     from armreach_core.diagnostics.robot_page import markdown, save_robot
     from armreach_core.diagnostics.robot_report import inspect_robot

@@ -18,8 +18,17 @@ def markdown(report: RobotReport) -> str:
     lines = [f"# {report.name or report.urdf}", "", f"URDF: `{report.urdf}`", ""]
     if report.problems:
         lines += ["**Cannot be used as it is:**", ""] + [f"- {p}" for p in report.problems] + [""]
+    elif report.parity_failures:
+        lines += [
+            "**Not usable across engines: each engine runs it, but the parity check does not hold:**",
+            "",
+            *[f"- {failure}" for failure in report.parity_failures],
+            "",
+        ]
+    elif report.parity:
+        lines += [f"**Usable.** The parity check holds ({', '.join(e.backend for e in report.engines)}).", ""]
     else:
-        lines += ["**Usable.**", ""]
+        lines += ["**Usable.** (Parity not checked: it needs two engines and --parity-steps above 0.)", ""]
     if report.joints:
         lines.append(
             markdown_table(
@@ -42,6 +51,7 @@ def markdown(report: RobotReport) -> str:
             "",
             f"- end effector: `{report.ee_link}`",
             f"- joints off the chain, held: {', '.join(report.held_joints) or 'none'}",
+            *[f"- anatomy: {decision}" for decision in report.anatomy],
             f"- home: lowest link {report.home_lowest_m:+.3f} m above the ground, dexterity {report.home_dexterity:.3f}"
             f" m/rad, self-collisions: {report.home_self_collisions or 'none'}",
             f"- reach {report.reach_m:.3f} m; targets in a ball of {report.target_radius_m:.2f} m around "
@@ -130,7 +140,7 @@ def corpus_table(reports: Mapping[str, RobotReport]) -> str:
 
 
 def save_robot(report: RobotReport, out: Path, env_kwargs: Mapping[str, Any]) -> list[Path]:
-    """Write ``robot.json``, ``robot.md`` and, for a usable arm, ``robot.png`` into ``out``: the paths written.
+    """Write ``robot.json``, ``robot.md`` and, for an arm that runs, ``robot.png`` into ``out``: the paths written.
 
     ``env_kwargs`` (``urdf`` included) build the env the picture is taken in.
     """
@@ -138,7 +148,7 @@ def save_robot(report: RobotReport, out: Path, env_kwargs: Mapping[str, Any]) ->
     (out / "robot.json").write_text(json.dumps(report.to_json(), indent=1, default=str) + "\n")
     (out / "robot.md").write_text(markdown(report) + "\n")
     saved = [out / "robot.md", out / "robot.json"]
-    if report.usable and report.engines and report.engines[0].error is None:
+    if not report.problems and report.engines and report.engines[0].error is None:
         picture(env_kwargs, report.engines[0].backend, out / "robot.png")
         saved.append(out / "robot.png")
     return saved

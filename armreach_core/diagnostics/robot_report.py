@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from armreach_core.backend import Camera
 from armreach_core.diagnostics.corpus import CorpusArm, for_each_corpus_arm
+from armreach_core.diagnostics.picture import robot_picture
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ArmReachError
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
@@ -55,6 +55,7 @@ class RobotReport:
     joints: list[dict[str, Any]] = field(default_factory=list)
     held_joints: list[str] = field(default_factory=list)
     ee_link: str = ""
+    anatomy: list[str] = field(default_factory=list)
     home: list[float] = field(default_factory=list)
     home_lowest_m: float = math.nan
     home_dexterity: float = math.nan
@@ -66,11 +67,21 @@ class RobotReport:
     engines: list[EngineFacts] = field(default_factory=list)
     parity: dict[str, Any] = field(default_factory=dict)
     problems: list[str] = field(default_factory=list)
+    #: What the parity run found outside its tolerances (empty: it holds, or it did not run).
+    parity_failures: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
     @property
     def usable(self) -> bool:
-        return not self.problems
+        """Nothing stops the arm, and the parity run, when there was one, holds."""
+        return not self.problems and not self.parity_failures
+
+    @property
+    def verdict(self) -> str:
+        """``usable``, ``NOT usable`` or ``NOT usable: the engines disagree`` (parity alone failed)."""
+        if self.problems:
+            return "NOT usable"
+        return "NOT usable: the engines disagree" if self.parity_failures else "usable"
 
     def to_json(self) -> dict[str, Any]:
         out = asdict(self)
@@ -87,6 +98,7 @@ def _robot_facts(report: RobotReport, env: ArmEnv) -> None:
         for j in robot.joints
     ]
     report.held_joints = [joint.name for joint in robot.held_joints]
+    report.anatomy = list(robot.anatomy)
     report.home = [float(v) for v in robot.home]
     facts = describe(robot, robot.home)
     report.home_lowest_m = facts["lowest_link_m"]
@@ -211,23 +223,11 @@ def _engine(backend: str, env_kwargs: Mapping[str, Any], steps: int, ik_episodes
 
 
 def picture(env_kwargs: Mapping[str, Any], backend: str, path: Path) -> None:
-    """The arm at home with the target ball's centre and radius marked, framed by its reach."""
+    """Save the arm at home with its target region and joint axes, framed to fit
+    (:func:`armreach_core.diagnostics.picture.robot_picture`), as a PNG at ``path``."""
     from PIL import Image
 
-    env = ArmEnv(DEFAULT_TASK, backend=backend, render_mode="rgb_array", **env_kwargs)
-    try:
-        env.reset(seed=0)
-        sampler = env.task.sampler  # type: ignore[attr-defined]
-        reach = float(sampler.map.reach)
-        centre = tuple(float(v) for v in sampler.center)
-        env.backend.add_marker("target-region", float(sampler.radius), (0.2, 0.5, 0.9, 0.25))
-        env.backend.set_marker("target-region", np.asarray(centre))
-        env.camera = Camera(target=(centre[0] / 2, centre[1] / 2, centre[2] / 2), distance=2.6 * max(reach, 0.2))
-        frame = env.render()
-    finally:
-        env.close()
-    if frame is not None:
-        Image.fromarray(frame).save(path)
+    Image.fromarray(robot_picture(env_kwargs, backend).image).save(path)
 
 
 def inspect_robot(
@@ -295,6 +295,7 @@ def inspect_robot(
             },
             "failures": parity.failures(),
         }
+        report.parity_failures = [f"parity {' vs '.join(working)}: {failure}" for failure in parity.failures()]
     return report
 
 
@@ -322,8 +323,7 @@ def inspect_corpus(
             parity_steps=parity_steps,
             seed=seed,
         )
-        verdict = "usable" if report.usable else "NOT usable"
-        log(f"{arm.name}: {verdict} ({time.perf_counter() - started:.0f} s)")
+        log(f"{arm.name}: {report.verdict} ({time.perf_counter() - started:.0f} s)")
         return report
 
     return for_each_corpus_arm(one, log=log, arms=arms)

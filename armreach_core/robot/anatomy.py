@@ -1,16 +1,28 @@
 """What a URDF's tree says about an arm: where its chain ends, its gripper, its end effector.
 
-:func:`default_end_effector` finds them from the tree and the names alone; nothing here
-is tuned to one arm. Walking down from the root link, along the only subtree that holds
-movable joints, the arm's chain ends at the link a gripper hangs from (its *mount*):
+:func:`default_end_effector` finds them from the tree's structure first and the names second;
+nothing here is tuned to one arm. Walking down from the root link, along the only subtree that
+holds movable joints, the arm's chain ends at the link a gripper hangs from (its *mount*).
 
-* the next movable joint is a mimic joint, or its name says gripper (:data:`GRIPPER_WORDS`:
-  finger, gripper, jaw...), or its child link is a moving gripper part (:data:`PART_WORDS`;
-  a link called ``gripper`` is the gripper's body, which the wrist turns, not a part); or
-* the tree branches into two or more subtrees with movable joints, each either named as a
-  gripper throughout or holding fewer movable joints than the chain above it (the Panda's
-  fingers). Gripper-named branches beside a single other branch are fingers off the chain,
-  and the walk goes on into the other one.
+A movable joint on the way is an **arm joint** (a wrist) when it carries another joint that
+moves on its own (not a ``<mimic>``), or carries the tool centre the URDF names: a jaw moves
+against another jaw and carries neither, so such a joint is never held, whatever its or its
+child's name says (an SO-100 whose gripper body ``Fixed_Jaw`` hangs on ``wrist_roll``).
+Otherwise it is a **gripper joint**, and the chain ends above it, when
+
+* it is a ``<mimic>`` joint, or other joints mimic it (a finger linkage); or
+* (a hint, used only where the structure leaves the choice open) its name says gripper
+  (:data:`GRIPPER_WORDS`: finger, gripper, jaw...) or its child link is a moving gripper part
+  (:data:`PART_WORDS`; a link called ``gripper`` is the gripper's body, which the wrist turns,
+  not a part).
+
+Where the tree branches into two or more subtrees with movable joints, a subtree is a
+finger when it carries no tool centre and either mimics or is mimicked by a sibling, or is a
+prismatic joint beside another (parallel fingers), or is named as a gripper throughout. All
+fingers, or subtrees all shallower than the chain above them (the Panda's fingers): the
+gripper hangs here. Fingers beside a single other subtree hang off the chain, and the walk
+goes on into the other one; so does it into the one subtree whose movable joints carry the
+named tool centre (a wrist beside a jaw off the chain).
 
 The walk never stops before the first movable joint: the arm keeps at least its chain up
 to the gripper. Every movable joint below the mount is a gripper joint. Branches that are
@@ -19,8 +31,12 @@ none of these (two arms on one torso) make the end effector ambiguous: a
 
 The default end effector is a tool centre named in the URDF (:data:`TOOL_CENTRE_NAMES`, in
 that priority) rigidly attached to the mount, else the mount itself; without a gripper, the
-tool centre or the tip of the chain. Tips at the same position are equivalent (a UR's
-``ee_link`` and ``tool0``): the first one in priority and URDF order is taken.
+tool centre or the tip of the chain. When tool centres compete, one past the gripper mount
+(below it in the tree, between the fingers: a WidowX's ``ee_gripper_link`` beats its
+``ee_arm_link``) wins over those at or above the mount. Tips at the same position are
+equivalent (a UR's ``ee_link`` and ``tool0``): the first one in priority and URDF order is
+taken; tool centres of the same standing at different places are a real tie (an error).
+Every decision is kept with its reason (:attr:`EndEffector.decisions`) and logged.
 """
 
 from __future__ import annotations
@@ -86,11 +102,16 @@ def says_gripper(joint: Any) -> bool:
 
 @dataclass(frozen=True)
 class EndEffector:
-    """The default end effector, why it was chosen, and the gripper joints found on the way."""
+    """The default end effector, why it was chosen, and the gripper joints found on the way.
+
+    ``decisions`` says, one line each, why joints were taken for the arm or the gripper and
+    why one tool centre won over others.
+    """
 
     link: str
     reason: str
     gripper_joints: tuple[str, ...]
+    decisions: tuple[str, ...] = ()
 
 
 class Tree:
@@ -101,9 +122,15 @@ class Tree:
         self.root = root
         self.children: dict[str, list[Any]] = {link: [] for link in links}
         self.parent_joint: dict[str, Any] = {}
+        #: Joints by name, and the joints that mimic each joint.
+        self.joints: dict[str, Any] = {}
+        self.followers: dict[str, list[str]] = {}
         for joint in joints:
             self.children[str(joint.parent)].append(joint)
             self.parent_joint[str(joint.child)] = joint
+            self.joints[str(joint.name)] = joint
+            if joint.mimic is not None and self._moves(joint):
+                self.followers.setdefault(str(joint.mimic.joint), []).append(str(joint.name))
         order = [root]  # breadth first: parents before children
         for link in order:
             order.extend(str(j.child) for j in self.children[link])
@@ -114,6 +141,8 @@ class Tree:
         for link in reversed(order):
             self.count[link] = sum(self.count[str(j.child)] + self._moves(j) for j in self.children[link])
             self.depth[link] = max((self.depth[str(j.child)] + self._moves(j) for j in self.children[link]), default=0)
+        #: Why joints were taken for the arm or the gripper, in the order decided (see :meth:`mount`).
+        self.decisions: list[str] = []
 
     @staticmethod
     def _moves(joint: Any) -> int:
@@ -138,9 +167,68 @@ class Tree:
                 frontier.append(str(below.child))
         return out
 
-    def _gripper_branch(self, joint: Any) -> bool:
+    def _tool_centres_below(self, joint: Any) -> list[str]:
+        """Links below ``joint`` (its child included) whose names make them a tool centre."""
+        return [str(j.child) for j in self._branch_joints(joint) if tool_centre_rank(str(j.child)) is not None]
+
+    def _moves_tool_centre(self, joint: Any) -> bool:
+        """Whether a movable joint at or below ``joint`` carries a tool centre the URDF names (a wrist does)."""
+        for tool in self._tool_centres_below(joint):
+            link = tool
+            while link != str(joint.parent):
+                above = self.parent_joint[link]
+                if self._moves(above):
+                    return True
+                link = str(above.parent)
+        return False
+
+    def _finger(self, joint: Any, siblings: list[Any]) -> str | None:
+        """Why the subtree of ``joint`` is a finger beside ``siblings``, or ``None`` if it is not one."""
         movable = [j for j in self._branch_joints(joint) if self._moves(j)]
-        return bool(movable) and all(says_gripper(j) for j in movable)
+        if not movable or self._tool_centres_below(joint):
+            return None
+        names = {str(j.name) for s in siblings for j in self._branch_joints(s) if s is not joint}
+        for j in movable:
+            master = str(j.mimic.joint) if j.mimic is not None else None
+            if master in names or names & set(self.followers.get(str(j.name), ())):
+                return "it moves with a sibling through a <mimic>"
+        prismatic = [
+            s for s in siblings if s is not joint and str(s.type) == "prismatic" and not self.count[str(s.child)]
+        ]
+        if str(joint.type) == "prismatic" and not self.count[str(joint.child)] and prismatic:
+            return "a prismatic finger beside another"
+        if all(says_gripper(j) for j in movable):
+            return "its joints' names say gripper (a hint)"
+        return None
+
+    def _jaw(self, joint: Any) -> tuple[bool, str | None]:
+        """Whether a movable joint on the chain moves a jaw (ends the chain), and why (``None``: nothing to say)."""
+        name = str(joint.name)
+        hint = says_gripper(joint)
+        if joint.mimic is not None:
+            return True, f"{name!r} is a gripper joint: it mimics {str(joint.mimic.joint)!r}"
+        own = [j for j in self.movable_below(str(joint.child)) if self.joints[j].mimic is None]
+        if own:
+            if not hint:
+                return False, None
+            return False, (
+                f"{name!r} is an arm joint although its name or its child's says gripper: it carries {own[0]!r}, "
+                "which moves on its own, so it is a wrist, never a jaw"
+            )
+        if name in self.followers:
+            return True, f"{name!r} is a gripper joint: {', '.join(map(repr, self.followers[name]))} mimic it"
+        tools = self._tool_centres_below(joint)
+        if tools and hint:
+            return False, (
+                f"{name!r} is an arm joint although its name or its child's says gripper: it carries the tool "
+                f"centre {tools[0]!r}"
+            )
+        if hint:
+            return (
+                True,
+                f"{name!r} is a gripper joint: the last joint of the chain, and its name or its child's says so",
+            )
+        return False, None
 
     def rigid_group(self, link: str) -> dict[str, npt.NDArray[np.float64]]:
         """Links rigidly attached to ``link`` (through fixed joints), with their transforms from the group's top."""
@@ -162,6 +250,7 @@ class Tree:
         """The link the arm's chain ends at, and the gripper joints below it (none: the chain's tip).
 
         ``start`` is where the walk begins (default the root), with ``arm`` movable joints above it.
+        The reasons for its choices are appended to :attr:`decisions`.
 
         Raises:
             URDFError: the tree branches into arms, not fingers; the message lists the candidates.
@@ -172,16 +261,38 @@ class Tree:
             if not branches:
                 return link, ()
             if len(branches) > 1:
-                others = [j for j in branches if not self._gripper_branch(j)]
+                why = {str(j.name): self._finger(j, branches) for j in branches}
+                others = [j for j in branches if why[str(j.name)] is None]
                 short = all(self.depth[str(j.child)] + self._moves(j) < arm for j in branches)
+                wrists = [j for j in branches if self._moves_tool_centre(j)]
+                if arm >= 1 and len(wrists) == 1:  # the one subtree whose joints move the tool centre goes on
+                    for j in branches:
+                        if j is not wrists[0]:
+                            why[str(j.name)] = why[str(j.name)] or f"{str(wrists[0].name)!r} moves the tool centre"
+                    others, short = wrists, False
                 if arm >= 1 and (not others or short):
+                    self.decisions.append(
+                        f"the gripper hangs from {link!r}: its subtrees "
+                        + "; ".join(
+                            f"{str(j.name)!r}: {why[str(j.name)] or 'shallower than the arm'}" for j in branches
+                        )
+                    )
                     return link, tuple(self.movable_below(link))
                 if len(others) != 1:
                     raise self._ambiguous(link, branches)
+                for j in branches:
+                    if j is not others[0]:
+                        self.decisions.append(
+                            f"{str(j.name)!r} is a finger off the chain at {link!r}: {why[str(j.name)]}"
+                        )
                 branches = others  # fingers beside the arm's continuation stay off the chain
             joint = branches[0]
-            if self._moves(joint) and arm >= 1 and says_gripper(joint):
-                return link, tuple(self.movable_below(link))
+            if self._moves(joint) and arm >= 1:
+                jaw, reason = self._jaw(joint)
+                if reason is not None:
+                    self.decisions.append(reason)
+                if jaw:
+                    return link, tuple(self.movable_below(link))
             arm += self._moves(joint)
             link = str(joint.child)
 
@@ -218,7 +329,7 @@ class Tree:
         """The default end effector at the mount ``found`` (see the module docstring).
 
         Raises:
-            URDFError: two tool centres of the same priority at different places.
+            URDFError: two tool centres of the same standing at different places.
         """
         mount, gripper = found
         group = self.rigid_group(mount)
@@ -229,6 +340,17 @@ class Tree:
         ranked = sorted(
             (rank, self.order.index(name), name) for name in usable if (rank := tool_centre_rank(name)) is not None
         )
+        notes = list(self.decisions)
+        if gripper and ranked:
+            past = [r for r in ranked if r[2] != mount and self._descends(r[2], mount)]
+            if past and len(past) < len(ranked):
+                ahead = {name for *_, name in past}
+                behind = [name for *_, name in ranked if name not in ahead]
+                notes.append(
+                    f"tool centre {past[0][2]!r} is past the gripper mount {mount!r} (between the fingers), so it "
+                    f"wins over {', '.join(map(repr, behind))}, at or above the mount"
+                )
+                ranked = past
         if ranked:
             best = [name for rank, _, name in ranked if rank == ranked[0][0]]
             place = usable[best[0]][:3, 3]
@@ -244,13 +366,13 @@ class Tree:
             reason = f"the tool centre the URDF names ({kind}) at {at}, {mount!r}"
             if same:
                 reason += f"; {', '.join(repr(n) for n in same)} at the same place"
-            return EndEffector(link, reason, gripper)
+            return EndEffector(link, reason, gripper, tuple(notes))
         if gripper:
-            return EndEffector(mount, at, gripper)
+            return EndEffector(mount, at, gripper, tuple(notes))
         leaves = [name for name in usable if not self.children[name]]
         if leaves and all(np.linalg.norm(usable[n][:3, 3] - usable[leaves[0]][:3, 3]) <= SAME_PLACE for n in leaves):
-            return EndEffector(leaves[0], at, ())
-        return EndEffector(mount, "the last moving link of the arm's chain (its fixed tips differ)", ())
+            return EndEffector(leaves[0], at, (), tuple(notes))
+        return EndEffector(mount, "the last moving link of the arm's chain (its fixed tips differ)", (), tuple(notes))
 
 
 def default_end_effector(tree: Tree) -> EndEffector:
@@ -259,4 +381,5 @@ def default_end_effector(tree: Tree) -> EndEffector:
     Raises:
         URDFError: the choice is ambiguous; the message lists the candidates.
     """
+    tree.decisions.clear()
     return tree.choose(tree.mount())

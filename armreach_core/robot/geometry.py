@@ -190,3 +190,69 @@ def self_collisions(robot: ArmKinematics, q: npt.ArrayLike) -> list[tuple[str, s
             if _overlap(placed[a], placed[b]):
                 hits.append((a, b))
     return hits
+
+
+@functools.lru_cache(maxsize=32)
+def _hull_planes(robot: ArmKinematics) -> dict[str, FloatArray]:
+    """Each link's collision points as a convex hull in its own frame: facet planes (k, 4), ``n·p + d <= 0`` inside."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    planes = {}
+    for link, points in _geometry(robot).points.items():
+        try:
+            planes[link] = np.asarray(ConvexHull(points, qhull_options="QJ").equations, dtype=np.float64)
+        except (QhullError, ValueError):  # too few points for a hull: the box around them
+            low, high = points.min(axis=0), points.max(axis=0)
+            planes[link] = np.vstack([np.hstack([np.eye(3), -high[:, None]]), np.hstack([-np.eye(3), low[:, None]])])
+    return planes
+
+
+def moving_with(robot: ArmKinematics, link: str) -> frozenset[str]:
+    """``link``, the links fixed to it and every link below them: the body that moves with it, gripper included."""
+    top = link
+    parent = {j.child: j for j in robot.tree_joints}
+    while top in parent and parent[top].kind == "fixed":
+        top = parent[top].parent
+    body = {top}
+    for joint in robot.tree_joints:  # parents come first
+        if joint.parent in body:
+            body.add(joint.child)
+    return frozenset(body)
+
+
+def hulls_at(robot: ArmKinematics, q: npt.ArrayLike, skip: frozenset[str] = frozenset()) -> tuple[FloatArray, ...]:
+    """The links' collision hulls at ``q`` (one configuration), ``skip`` aside: per link, its facet planes
+    ``(k, 4)`` in the world frame, ``n·p + d <= 0`` inside."""
+    frames = robot.link_transforms(np.asarray(q, dtype=np.float64))
+    placed = []
+    for link, planes in _hull_planes(robot).items():
+        if link in skip:
+            continue
+        rotation, origin = frames[link][:3, :3], frames[link][:3, 3]
+        normals = planes[:, :3] @ rotation.T
+        placed.append(np.column_stack([normals, planes[:, 3] - normals @ origin]))
+    return tuple(placed)
+
+
+def clearance(hulls: tuple[FloatArray, ...], points: npt.ArrayLike) -> FloatArray:
+    """How far (m) each point lies outside the hulls (:func:`hulls_at`).
+
+    Negative inside a hull. Outside, the distance to the farthest facet plane: at most the
+    true distance (the hull grown by a margin this way has its corners squared off, not
+    rounded), so ``clearance(...) > margin`` keeps at least ``margin`` from every link.
+    ``inf`` without hulls.
+    """
+    pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    out = np.full(len(pts), np.inf)
+    for planes in hulls:
+        out = np.minimum(out, (pts @ planes[:, :3].T + planes[:, 3]).max(axis=1))
+    return out
+
+
+def world_points(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:
+    """Every link's collision points and every link's origin at ``q`` (one configuration), world frame, (n, 3)."""
+    frames = robot.link_transforms(np.asarray(q, dtype=np.float64))
+    clouds = [np.array([frame[:3, 3] for frame in frames.values()])]
+    for link, points in _geometry(robot).points.items():
+        clouds.append(points @ frames[link][:3, :3].T + frames[link][:3, 3])
+    return np.vstack(clouds)

@@ -148,7 +148,7 @@ def place(
     (shape, limits, ground), or the default one.
 
     An arm that no pose keeps above the ground, and whose base position was not given,
-    has its base raised by what it lacks (logged at INFO on ``armreach.home``), so that it
+    has its base raised by what it lacks (with a warning on ``armreach.home``), so that it
     works as it comes; the home is then chosen for the raised base.
 
     Returns:
@@ -169,7 +169,7 @@ def place(
             raised = ArmKinematics(
                 robot.parsed, robot.ee_link, robot.tool_joint_names, (x, y, z + exc.lift), robot.base_orientation
             )
-            log.info("raised the base of %r by %.2f m: %s", robot.name, exc.lift, exc)
+            log.warning("raised the base of %r by %.2f m: %s", robot.name, exc.lift, exc)
             return raised.base_position, default_home(raised)
     try:
         q = np.asarray(home, dtype=np.float64)

@@ -79,12 +79,17 @@ class ArmKinematics:
         gripper_joints: the movable joints below the link the gripper hangs from, as the
             default end-effector analysis found them (empty without a gripper, or when
             ``ee_link`` was given and the tree alone is ambiguous).
+        anatomy: the analysis's decisions, one sentence each with its reason (which joints
+            are the arm's or the gripper's, which tool centre won), ending with the end
+            effector's; each is logged to ``armreach.robot`` at INFO.
         tree_joints: every URDF joint, parents before children (:class:`TreeJoint`).
         base_position, base_orientation, base_transform: the base placement.
 
     Raises:
         URDFError: the file cannot be used, with the reason and the fix.
     """
+
+    anatomy: tuple[str, ...]
 
     def __init__(
         self,
@@ -183,6 +188,9 @@ class ArmKinematics:
             )
         #: Number of actuated joints on the chain to the end effector (the arm proper).
         self.arm_dof: int = len(movable)
+        arm = f"the arm of {self.name!r}: {self.arm_dof} joints from {self.root_link!r} to {self.ee_link!r}"
+        self.anatomy = (f"{arm} ({', '.join(str(j.name) for j in movable)}), every one actuated", *self.anatomy)
+        log.info("%s", self.anatomy[0])
         if len(set(tool_joints)) != len(tool_joints):
             raise URDFError(f"tool_joints {list(tool_joints)} name a joint twice")
         tools = [tool_joint(self.name, joints, name, chain, self.ee_link) for name in tool_joints]
@@ -220,6 +228,7 @@ class ArmKinematics:
     def _choose_ee_link(self, ee_link: str | None) -> str:
         """The end effector (given or the default), setting :attr:`gripper_joints` on the way."""
         self.gripper_joints: tuple[str, ...] = ()
+        self.anatomy = ()
         if ee_link is not None:
             if ee_link not in self.link_names:
                 raise URDFError(
@@ -227,15 +236,20 @@ class ArmKinematics:
                 )
             try:
                 chain = set(self._chain_to(ee_link))
+                self._tree.decisions.clear()
                 self.gripper_joints = tuple(j for j in self._tree.mount()[1] if j not in chain)
+                self.anatomy = tuple(self._tree.decisions)
             except URDFError:  # ambiguous without ee_link: no gripper to speak of
                 pass
-            log.info("end effector of %r: %r, given as ee_link", self.name, ee_link)
-            return ee_link
-        choice = default_end_effector(self._tree)
-        self.gripper_joints = choice.gripper_joints
-        log.info("end effector of %r: %r, %s", self.name, choice.link, choice.reason)
-        return choice.link
+            self.anatomy += (f"end effector of {self.name!r}: {ee_link!r}, given as ee_link",)
+        else:
+            choice = default_end_effector(self._tree)
+            self.gripper_joints = choice.gripper_joints
+            self.anatomy = (*choice.decisions, f"end effector of {self.name!r}: {choice.link!r}, {choice.reason}")
+            ee_link = choice.link
+        for decision in self.anatomy:
+            log.info("%s", decision)
+        return ee_link
 
     def _chain_to(self, link: str) -> list[str]:
         """Names of the joints from the root to ``link``, root first."""

@@ -1,5 +1,9 @@
 """Where the arm can reach: a voxel map built from the URDF, used to sample targets.
 
+Targets are drawn (:class:`TargetSampler`) in a ball, inside this map, above a floor and,
+unless told otherwise, clear of the arm's own links at home, so that the end effector gets
+to them without passing through the arm.
+
 The map is the set of voxels that the end effector visits over many joint
 configurations drawn uniformly inside the limits and holdable against gravity with the
 URDF's effort limits (:mod:`armreach_core.robot.statics`; for an arm that cannot hold every
@@ -18,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.errors import ConfigError
+from armreach_core.robot.geometry import clearance, hulls_at, moving_with
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.robot.statics import holdable, holdable_paths
 
@@ -116,19 +121,48 @@ def reachability_map(robot: RobotModel) -> ReachabilityMap:
     return ReachabilityMap(robot)
 
 
+@functools.lru_cache(maxsize=32)
+def home_hulls(robot: RobotModel) -> tuple[FloatArray, ...]:
+    """The collision hulls (:func:`~armreach_core.robot.geometry.hulls_at`) of ``robot``'s links at home
+    that do not move with its end effector (cached)."""
+    return hulls_at(robot, robot.home, moving_with(robot, robot.ee_link))
+
+
+@functools.lru_cache(maxsize=32)
+def _clear_voxels(robot: RobotModel, margin: float) -> npt.NDArray[np.bool_]:
+    """The reachability map's interior voxels whose centres keep ``margin`` from :func:`home_hulls` (cached)."""
+    grid = reachability_map(robot).grid.copy()
+    cells = np.argwhere(grid)
+    centres = (cells + reachability_map(robot).origin + 0.5) * reachability_map(robot).voxel
+    grid[tuple(cells.T)] = clearance(home_hulls(robot), centres) > margin
+    return grid
+
+
 class TargetSampler:
-    """Uniform targets in a ball, above a floor, and inside the reachable set.
+    """Uniform targets in a ball, above a floor, inside the reachable set and clear of the arm.
 
     Args:
         robot: the arm.
         center: centre of the ball (m, world frame).
         radius: radius of the ball (m).
         min_height: lowest allowed target height (m).
+        clear_of_arm: how far (m) every target stays from the arm's own links at home (their
+            collision geometry's convex hulls, :func:`armreach_core.robot.geometry.clearance`;
+            the end effector's body and what hangs below it aside, since they go to the target):
+            the end effector gets to a target without passing through the arm. ``None``: no
+            such check (targets may lie inside the arm's links).
     """
 
     MAX_TRIES = 10_000
 
-    def __init__(self, robot: RobotModel, center: npt.ArrayLike, radius: float, min_height: float) -> None:
+    def __init__(
+        self,
+        robot: RobotModel,
+        center: npt.ArrayLike,
+        radius: float,
+        min_height: float,
+        clear_of_arm: float | None = None,
+    ) -> None:
         self.center: FloatArray = np.asarray(center, dtype=np.float64)
         if self.center.shape != (3,) or not np.all(np.isfinite(self.center)):
             raise ConfigError(f"target_center={center!r} must be three finite numbers (m)")
@@ -136,19 +170,25 @@ class TargetSampler:
             raise ConfigError(f"target_radius={radius!r} must be a positive number (m)")
         self.radius = float(radius)
         self.min_height = float(min_height)
+        if clear_of_arm is not None and not (np.isfinite(clear_of_arm) and clear_of_arm >= 0):
+            raise ConfigError(f"the targets' clearance from the arm, {clear_of_arm!r}, must be a distance >= 0 (m)")
+        self.clear_of_arm = clear_of_arm
+        self.robot = robot
         self.map = reachability_map(robot)
+        #: The interior voxels whose centres are clear of the arm (all of them, without the check).
+        self.grid = self.map.grid if clear_of_arm is None else _clear_voxels(robot, float(clear_of_arm))
         inside = self.map.centers(self.center - self.radius, self.center + self.radius)
         #: Interior voxel centres that are valid targets: drawn from when rejection sampling
         #: finds nothing (a ball that barely overlaps the reachable set).
-        self.fallback: FloatArray = inside[self.accepts(inside)] if len(inside) else inside
+        self.fallback: FloatArray = inside[self._accepts_centres(inside)] if len(inside) else inside
 
     def has_targets(self) -> bool:
         """Whether any valid target exists."""
         return len(self.fallback) > 0
 
     def nearest_reachable(self, point: npt.ArrayLike) -> FloatArray | None:
-        """The interior voxel centre at least ``min_height`` high nearest to ``point``, if any."""
-        every = (np.argwhere(self.map.grid) + self.map.origin + 0.5) * self.map.voxel
+        """The interior voxel centre, at least ``min_height`` high and clear of the arm, nearest to ``point``."""
+        every = (np.argwhere(self.grid) + self.map.origin + 0.5) * self.map.voxel
         every = every[every[:, 2] >= self.min_height]
         if not len(every):
             return None
@@ -160,6 +200,23 @@ class TargetSampler:
         pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
         in_ball = np.linalg.norm(pts - self.center, axis=1) <= self.radius
         accepted: npt.NDArray[np.bool_] = in_ball & (pts[:, 2] >= self.min_height) & self.map.contains(pts)
+        if np.any(accepted):
+            accepted[accepted] = self.clear(pts[accepted])
+        return accepted
+
+    def clear(self, points: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+        """Whether each point keeps :attr:`clear_of_arm` from the arm's links at home (all, without the check)."""
+        pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        if self.clear_of_arm is None:
+            return np.ones(len(pts), dtype=bool)
+        far: npt.NDArray[np.bool_] = clearance(home_hulls(self.robot), pts) > self.clear_of_arm
+        return far
+
+    def _accepts_centres(self, centres: FloatArray) -> npt.NDArray[np.bool_]:
+        """:meth:`accepts` for interior voxel centres, through the cached :attr:`grid`."""
+        in_ball = np.linalg.norm(centres - self.center, axis=1) <= self.radius
+        idx = np.floor(centres / self.map.voxel).astype(np.int64) - self.map.origin
+        accepted: npt.NDArray[np.bool_] = in_ball & (centres[:, 2] >= self.min_height) & self.grid[tuple(idx.T)]
         return accepted
 
     def sample(self, rng: np.random.Generator) -> FloatArray:

@@ -20,7 +20,7 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     self-collision is off unless ``self_collision=True`` (parent/child pairs excluded), and
     inertias come from the URDF (``inertia_from_file=True``).
 
-    Made with ``gym.make("armreach/Reach-v0", backend="pybullet", urdf=None,
+    Made with ``gym.make("armreach/Reach-v1", backend="pybullet", urdf=None,
     ee_link=None, render_mode=None)`` after ``import armreach_core``, or by calling this
     class with the same keyword arguments.
 
@@ -69,7 +69,8 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     uniform in a ball of radius ``target_radius`` centred at ``target_center`` (ar6: 0.5 m around
     (0.45, 0, 0.45) m; another arm: half its reach ``R`` around the point ``R/2`` forward and
     ``R/2`` up from its base), keeping only points at least ``min_target_height`` (0.05 m) above
-    the ground and inside the arm's reachable set computed from the URDF. All
+    the ground, inside the arm's reachable set computed from the URDF, and at least
+    ``success_threshold`` away from the arm's own links at home (``targets_clear_of_arm``). All
     randomness comes from the env's generator (``reset(seed=...)``).
 
     ## Episode end
@@ -99,6 +100,7 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     | ``target_radius`` | the robot's (ar6: 0.5), else half the reach | radius of the target ball (m) |
     | ``target_center`` | the robot's (ar6: (0.45, 0, 0.45)), else as above | centre of the ball (m, world frame) |
     | ``min_target_height`` | 0.05 | lowest target height (m) |
+    | ``targets_clear_of_arm`` | ``True`` | targets keep ``success_threshold`` from the arm's links at home |
     | ``goal_conditioned`` | ``False`` | a ``Dict`` observation for HER |
 
     ## Version history

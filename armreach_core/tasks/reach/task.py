@@ -5,8 +5,9 @@ Description:
     random in a ball (radius 0.5 m) in front of the arm.
 
 Randomizations:
-    The target, uniformly in the ball, above ``min_target_height`` and inside the arm's
-    reachable set (see :mod:`armreach_core.robot.workspace`), drawn with the env's generator.
+    The target, uniformly in the ball, above ``min_target_height``, inside the arm's
+    reachable set and at least ``success_threshold`` away from the arm's own links at home
+    (see :mod:`armreach_core.robot.workspace`), drawn with the env's generator.
 
 Success:
     ``distance < success_threshold``; the episode then terminates.
@@ -68,6 +69,10 @@ class ReachTask(Task):
             leans to (a base joint of limited range: SO-100 faces -y;
             :attr:`armreach_core.robot.workspace.ReachabilityMap.forward`).
         min_target_height: lowest target height (m), default 0.05.
+        targets_clear_of_arm: keep every target at least ``success_threshold`` away from the
+            arm's own links at home (their collision geometry; the end effector's body and
+            its gripper aside), so that the end effector gets there without passing through
+            the arm; default True (``False``: the ``Reach-v0`` targets, which may touch the arm).
         goal_conditioned: return a Dict observation (observation / achieved_goal /
             desired_goal) for HER, default False.
     """
@@ -84,6 +89,7 @@ class ReachTask(Task):
         target_radius: float | None = None,
         target_center: npt.ArrayLike | None = None,
         min_target_height: float = 0.05,
+        targets_clear_of_arm: bool = True,
         goal_conditioned: bool = False,
     ) -> None:
         super().__init__(robot)
@@ -98,12 +104,13 @@ class ReachTask(Task):
         self.success_bonus = float(success_bonus)
         self.goal_conditioned = bool(goal_conditioned)
         reach = reachability_map(robot).reach
+        clear = self.success_threshold if targets_clear_of_arm else None
         if target_radius is None:
             target_radius = TARGET_RADIUS_FRACTION * reach
         if target_center is None:
             facing = reachability_map(robot).forward
             front = np.asarray(robot.base_position) + 0.5 * reach * (facing + (0.0, 0.0, 1.0))
-            self.sampler = TargetSampler(robot, front, target_radius, min_target_height)
+            self.sampler = TargetSampler(robot, front, target_radius, min_target_height, clear)
             if not self.sampler.has_targets():  # an odd arm: centre the ball on a point it reaches
                 center = self.sampler.nearest_reachable(self.sampler.center)
                 if center is None:
@@ -112,13 +119,14 @@ class ReachTask(Task):
                         f"the ground (reach about {reach:.3g} m), so it has no targets to reach; check the URDF's "
                         "joint limits and link lengths, or lower min_target_height"
                     )
-                self.sampler = TargetSampler(robot, center, target_radius, min_target_height)
+                self.sampler = TargetSampler(robot, center, target_radius, min_target_height, clear)
         else:
-            self.sampler = TargetSampler(robot, target_center, target_radius, min_target_height)
+            self.sampler = TargetSampler(robot, target_center, target_radius, min_target_height, clear)
             if not self.sampler.has_targets():
                 raise ConfigError(
                     f"no point the arm reaches lies in the ball of radius {target_radius} m around "
-                    f"{self.sampler.center.tolist()} at least {min_target_height} m high; move target_center "
+                    f"{self.sampler.center.tolist()} at least {min_target_height} m high and clear of the arm; move "
+                    "target_center "
                     f"inside the arm's reach (about {self.sampler.map.reach:.2f} m) or enlarge target_radius"
                 )
         self.layout = ObservationLayout(self._components(self.sampler.map.reach))

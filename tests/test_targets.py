@@ -1,0 +1,159 @@
+"""Targets lie where the end effector gets without passing through the arm itself.
+
+The check is PyBullet's own collision geometry, not the sampler's hulls: at home, a ball of
+the success radius around each drawn target touches none of the arm's links (the end
+effector's body and what hangs below it aside).
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import armreach_core  # noqa: F401  (registers the env ids)
+from armreach_core.diagnostics.corpus import CORPUS, corpus_arm
+from armreach_core.env import ArmEnv
+from armreach_core.robot.ik import RESTARTS, IKPolicy
+from armreach_core.robot.model import RobotModel
+
+pybullet = pytest.importorskip("pybullet")
+
+#: The hulls the sampler keeps targets out of are built from at most 256 vertices of each
+#: mesh's hull, so they may sit a few millimetres inside the engine's full hull.
+THINNED_HULL_M = 0.005
+
+
+def _end_effector_body(robot: RobotModel) -> set[str]:
+    """The links that move with the end effector: from the child of the last actuated joint above it, down."""
+    parent = {j.child: j for j in robot.tree_joints}
+    link = robot.ee_link
+    while link in parent and parent[link].index < 0:
+        link = parent[link].parent
+    body = {link}
+    for joint in robot.tree_joints:
+        if joint.parent in body:
+            body.add(joint.child)
+    return body
+
+
+class _Engine:
+    """The arm in PyBullet at its home pose, and how far points are from its links."""
+
+    def __init__(self, robot: RobotModel) -> None:
+        self.client = pybullet.connect(pybullet.DIRECT)
+        self.arm = pybullet.loadURDF(str(robot.urdf_path), useFixedBase=True, physicsClientId=self.client)
+        positions = dict(zip(robot.joint_names, robot.home, strict=True))
+        positions.update(zip([j.name for j in robot.held_joints], robot.held_positions(robot.home), strict=True))
+        skip = _end_effector_body(robot)
+        self.links = [-1] if pybullet.getBodyInfo(self.arm, physicsClientId=self.client)[0].decode() not in skip else []
+        for index in range(pybullet.getNumJoints(self.arm, physicsClientId=self.client)):
+            info = pybullet.getJointInfo(self.arm, index, physicsClientId=self.client)
+            if info[1].decode() in positions:
+                pybullet.resetJointState(self.arm, index, positions[info[1].decode()], physicsClientId=self.client)
+            if info[12].decode() not in skip:
+                self.links.append(index)
+        shape = pybullet.createCollisionShape(pybullet.GEOM_SPHERE, radius=1e-3, physicsClientId=self.client)
+        self.probe = pybullet.createMultiBody(0, shape, physicsClientId=self.client)
+
+    def distance(self, point: Any) -> float:
+        """The distance (m) from ``point`` to the nearest link that is not the end effector's."""
+        pybullet.resetBasePositionAndOrientation(self.probe, list(point), (0, 0, 0, 1), physicsClientId=self.client)
+        nearest = 1.0
+        for link in self.links:
+            for hit in pybullet.getClosestPoints(
+                self.probe, self.arm, distance=1.0, linkIndexB=link, physicsClientId=self.client
+            ):
+                nearest = min(nearest, hit[8] + 1e-3)
+        return nearest
+
+    def close(self) -> None:
+        pybullet.disconnect(self.client)
+
+
+def _arm(name: str) -> str:
+    path = corpus_arm(name).path
+    if path is None:
+        pytest.skip(f"{name} is not installed: {corpus_arm(name).install}")
+    return str(path)
+
+
+@pytest.mark.parametrize("name", ["ar6", "xarm7", pytest.param("so101", marks=pytest.mark.slow)])
+def test_no_target_touches_the_arm_at_home(name: str) -> None:
+    env = ArmEnv("reach", backend="pybullet", **({} if name == "ar6" else {"urdf": _arm(name)}))
+    engine = _Engine(env.robot)
+    try:
+        task: Any = env.task
+        rng = np.random.default_rng(123)
+        for _ in range(80):
+            target = task.sampler.sample(rng)
+            assert engine.distance(target) >= task.success_threshold - THINNED_HULL_M, target
+    finally:
+        engine.close()
+        env.close()
+
+
+def test_reach_v0_keeps_its_targets_and_v1_draws_the_same_ones_where_they_clear_the_arm() -> None:
+    urdf = _arm("xarm7")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        old = gym.make("armreach/Reach-v0", urdf=urdf, backend="pybullet").unwrapped
+    new = gym.make("armreach/Reach-v1", urdf=urdf, backend="pybullet").unwrapped
+    engine = _Engine(new.robot)  # type: ignore[attr-defined]
+    touching = 0
+    try:
+        for seed in range(12):
+            old.reset(seed=seed)
+            new.reset(seed=seed)
+            was, now = old.task.target, new.task.target  # type: ignore[attr-defined]
+            assert engine.distance(now) >= 0.05 - THINNED_HULL_M
+            if engine.distance(was) >= 0.05:
+                assert np.array_equal(was, now), seed
+            else:
+                touching += 1
+    finally:
+        engine.close()
+        old.close()
+        new.close()
+    assert touching >= 1  # seed 1: the target against the xArm7's own column
+
+
+def test_reach_v0_warns_names_its_successor_and_draws_its_old_targets() -> None:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        old = gym.make("armreach/Reach-v0", backend="pybullet")
+    said = [str(w.message) for w in caught if issubclass(w.category, DeprecationWarning)]
+    assert any("armreach/Reach-v0 is deprecated: use armreach/Reach-v1" in text for text in said), said
+    assert old.unwrapped.task.sampler.clear_of_arm is None  # type: ignore[attr-defined]
+    old.close()
+    new = gym.make("armreach/Reach-v1", backend="pybullet")
+    assert new.unwrapped.task.sampler.clear_of_arm == new.unwrapped.task.success_threshold  # type: ignore[attr-defined]
+    new.close()
+
+
+#: Seeds of the IK reference's episodes below, kept apart from every other test's.
+IK_SEEDS = range(30_000, 30_100)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("arm", [pytest.param(arm, id=arm.name) for arm in CORPUS])
+def test_the_ik_reference_reaches_nearly_every_target_on_every_corpus_arm(arm: Any) -> None:
+    env = ArmEnv("reach", backend="pybullet", urdf=_arm(arm.name), max_episode_steps=400)
+    missed = []
+    try:
+        for seed in IK_SEEDS:
+            env.reset(seed=seed)
+            policy = IKPolicy(env.robot, env.max_joint_step, restarts=RESTARTS)
+            target: Any = env.task.target  # type: ignore[attr-defined]
+            while True:
+                _, _, terminated, truncated, info = env.step(policy.act(env.backend.joint_state()[0], target))
+                if terminated or truncated:
+                    break
+            if not info["is_success"]:
+                missed.append((seed, np.round(target, 3).tolist(), round(float(info["distance"]), 3)))
+    finally:
+        env.close()
+    assert len(missed) <= 0.01 * len(IK_SEEDS), missed
