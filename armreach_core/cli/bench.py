@@ -97,6 +97,7 @@ def run_learning(args: argparse.Namespace) -> int:
     """``--learning``: the preset's algorithms, each trained to its threshold over ``--seeds`` seeds."""
     from armreach_core.diagnostics.installed import installed_backends
     from armreach_core.errors import ConfigError
+    from armreach_core.plugins.defaults import DEFAULT_TASK
     from armreach_core.rl.learning_bench import bench_learning, summarize, to_markdown
     from armreach_core.rl.presets import load_preset
     from armreach_core.rl.validation import UntilSuccess
@@ -108,12 +109,12 @@ def run_learning(args: argparse.Namespace) -> int:
     if args.urdf is not None:
         raise ConfigError("--learning times the preset on its own arm; drop --urdf")
     preset = load_preset(args.preset)
-    have = preset.algos("reach")
+    have = preset.algos(DEFAULT_TASK)
     algos = args.algos.split(",") if args.algos else have
     unknown = [a for a in algos if a not in have]
     if unknown:
         raise ConfigError(f"--algos: preset {args.preset!r} has no {', '.join(unknown)}; it has {', '.join(have)}")
-    missing = [a for a in algos if UntilSuccess.from_settings(preset.get("reach", a)) is None]
+    missing = [a for a in algos if UntilSuccess.from_settings(preset.get(DEFAULT_TASK, a)) is None]
     if missing:
         raise ConfigError(
             f"preset {args.preset!r} does not stop at a success rate for {', '.join(missing)}: "
