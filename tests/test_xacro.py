@@ -240,9 +240,11 @@ def test_without_the_xacro_package_the_error_says_the_file_is_xacro_and_what_to_
     assert "3 numbers" not in str(caught.value)
 
 
+@pytest.mark.training
 def test_a_sweep_arm_and_a_run_folder_carry_the_description(arm, tmp_path):
     """A sweep's arm entry takes the packages and arguments; the run it makes records them, and the
     URDF the xacro expanded to, so that the run can be made again from its folder."""
+    pytest.importorskip("stable_baselines3")
     from armreach_core.rl import runs
     from armreach_core.rl.config import resolve_config
     from armreach_core.rl.sweep_spec import parse_arm

@@ -32,6 +32,7 @@ import logging
 import math
 import re
 import threading
+import warnings
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from types import CodeType
@@ -212,7 +213,9 @@ def process_xacro(path: Path, args: Mapping[str, str], packages: Packages, *, al
             or xacro cannot process it (its message, and the file).
     """
     try:
-        import xacro
+        with warnings.catch_warnings():  # on Python 3.10 its enum of units warns about a private name
+            warnings.simplefilter("ignore", DeprecationWarning)
+            import xacro
     except ImportError:
         raise URDFError(
             f"{str(path)!r} is a xacro file (it holds xacro markup), and the xacro package that expands it is not "
