@@ -64,7 +64,7 @@ def add_parser(sub: Any) -> None:
         default=None,
         metavar="RATE",
         help="stop at the first held-out evaluation with at least this success rate (0: train to --steps; "
-        "default: the preset's, 0.95 for fast)",
+        "default: the preset's, 0.98 for fast)",
     )
     parser.add_argument("--n-envs", type=int, default=None, help="parallel envs (default: the preset's, or 1)")
     add_robot_arguments(parser)

@@ -13,8 +13,8 @@ judges a policy that was not chosen on its own targets.
 Cheap enough to run often:
 
 * its episodes run :data:`BATCH` at a time, one batched policy call per step for all of them;
-* an evaluation stops at the failure that makes the threshold unreachable (with 50
-  episodes at 0.95, the third), so a policy that cannot pass yet costs a few episodes;
+* an evaluation stops at the failure that makes the threshold unreachable (with 100
+  episodes at 0.98, the third), so a policy that cannot pass yet costs a few episodes;
 * it runs only once the success rate of the last 100 training episodes is within ``gate``
   of the threshold (training episodes are shorter, so they under-estimate it).
 
@@ -49,7 +49,7 @@ class UntilSuccess:
     """When to evaluate and when to stop (preset section ``until_success``)."""
 
     threshold: float = 0.95
-    episodes: int = 50
+    episodes: int = 100
     every: int = 4096
     seed: int = 50_000
     #: Evaluate once the training success rate is at least ``threshold - gate``.
