@@ -279,7 +279,7 @@ MEASURED: dict[tuple[str, str], Measured] = {
     ("so101", "press"): Measured(0.00155, 0.0252, 1.05, None, (15, 15)),
     ("xarm7", "random"): Measured(0.483, 5.03, 2.65, 0.13, (None, 150)),
     ("xarm7", "biased"): Measured(0.231, 1.64, 12.3, 0.715, (54, 28)),
-    ("xarm7", "scripted"): Measured(0.0515, 1.09, None, 1.92, (None, None)),
+    ("xarm7", "scripted"): Measured(0.0222, 4.74, None, 1.92, (None, None)),  # Reach-v1 targets
     ("xarm7", "press"): Measured(0.015, 0.0717, 1.21, None, (13, 13)),
     ("panda", "random"): Measured(2.74, 2.02, 9.0, 0.369, (179, 165)),
     ("panda", "biased"): Measured(3.71, 2.03, None, 0.0827, (None, None)),
