@@ -1,9 +1,9 @@
-"""``ArmReachAroundEnv``: the reach env with obstacles, ending an episode at the first touch."""
+"""``ArmReachAroundEnv``: the reach env with obstacles, its docstring the task's documentation."""
 
 from __future__ import annotations
 
 import os
-from typing import Any, SupportsFloat
+from typing import Any
 
 from armreach_core.env import ArmEnv
 
@@ -83,10 +83,3 @@ class ArmReachAroundEnv(ArmEnv):
     ) -> None:
         kwargs.pop("task", None)
         super().__init__("reach-around", backend, urdf, ee_link, render_mode, **kwargs)
-
-    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
-        observation, reward, terminated, truncated, info = super().step(action)
-        if info["collision"] and getattr(self.task, "end_on_collision", False) and not terminated:
-            info["collision_end"] = True
-            terminated, truncated = True, False
-        return observation, reward, terminated, truncated, info

@@ -182,7 +182,12 @@ class ReachAroundTask(ReachTask):
         info["collision_obstacles"] = tuple(sorted(touched))
         info["clearance"] = float(self._clearances.min()) if self._clearances.size else HORIZON
         info["reward_collision"] = -self.collision_penalty * collision
+        info["collision_end"] = collision and self.end_on_collision
         return info
+
+    def ended(self, info: dict[str, Any]) -> bool:
+        """A touch ends the episode with ``end_on_collision`` (``info["collision_end"]``)."""
+        return bool(info["collision_end"])
 
     def compute_reward(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any) -> Any:
         reach = super().compute_reward(achieved_goal, desired_goal, info)

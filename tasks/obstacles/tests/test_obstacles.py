@@ -183,3 +183,20 @@ def test_a_short_training_run_with_planner_demonstrations(tmp_path: Path) -> Non
     assert main(argv) == 0
     assert runs.read_config(out).task == "reach-around"
     assert (out / "model.zip").is_file()
+
+
+def test_evaluation_counts_collisions_and_clearance_for_the_planner() -> None:
+    from armreach_obstacles.baseline import evaluate_planner
+
+    summary = evaluate_planner(BACKENDS[0], episodes=3).summary()
+    assert summary["success_rate"] == 1.0
+    assert summary["collision_episode_rate"] == 0.0 and summary["collisions_per_episode"] == 0.0
+    assert 0.005 < summary["min_clearance_min"] <= summary["min_clearance_mean"] < 0.2
+    assert summary["ended_by"]["success"] == 3 and summary["ended_by"]["collision"] == 0
+
+
+def test_rollout_runs_the_tasks_reference_controller() -> None:
+    from armreach_core.diagnostics.rollout import rollout
+
+    result = rollout(BACKENDS[0], policy="reference", task="reach-around", seed=1, max_steps=200)
+    assert result.summary["is_success"] and result.summary["collision_steps"] == 0
