@@ -200,3 +200,12 @@ def test_rollout_runs_the_tasks_reference_controller() -> None:
 
     result = rollout(BACKENDS[0], policy="reference", task="reach-around", seed=1, max_steps=200)
     assert result.summary["is_success"] and result.summary["collision_steps"] == 0
+
+
+@pytest.mark.parametrize(
+    "option",
+    [{"obstacle_shapes": ("cone",)}, {"obstacle_count": (3, 1)}, {"obstacle_size": (0.0, 0.1)}, {"obstacle_slots": 1}],
+)
+def test_bad_obstacle_options_are_config_errors(option: dict[str, Any]) -> None:
+    with pytest.raises(armreach_core.ConfigError):
+        gym.make(ENV_ID, backend=BACKENDS[0], **option)
