@@ -6,12 +6,12 @@ STAMP := $(VENV)/.installed
 
 .PHONY: install system-deps test test-slow test-no-mujoco test-py310 test-all lint demo bench clean
 
-$(STAMP): pyproject.toml backends/pybullet/pyproject.toml backends/mujoco/pyproject.toml tasks/grasp/pyproject.toml constraints-cpu.txt
+$(STAMP): pyproject.toml backends/pybullet/pyproject.toml backends/mujoco/pyproject.toml tasks/grasp/pyproject.toml tasks/obstacles/pyproject.toml constraints-cpu.txt
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt torch
 	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt -e ".[rl,zoo,ray,dev]" -e backends/pybullet -e backends/mujoco \
-		-e tasks/grasp
+		-e tasks/grasp -e tasks/obstacles
 	touch $(STAMP)
 
 # A virtual display for the live-window (render_mode="human") tests, on Debian-like machines where we are root.
@@ -50,7 +50,7 @@ test-py310:
 	if [ ! -f $(VENV310)/.installed ] || [ pyproject.toml -nt $(VENV310)/.installed ]; then \
 		$(PY310) -m venv $(VENV310) && $(VENV310)/bin/python -m pip install --quiet --upgrade pip setuptools && \
 		$(VENV310)/bin/python -m pip install --quiet -e ".[dev]" -e backends/pybullet -e backends/mujoco \
-			-e tasks/grasp && \
+			-e tasks/grasp -e tasks/obstacles && \
 		touch $(VENV310)/.installed || exit 1; \
 	fi; \
 	ARMREACH_TEST_HIDE=mujoco $(VENV310)/bin/python -m pytest -m "not slow and not training" -q -p no:cacheprovider

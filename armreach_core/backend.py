@@ -8,14 +8,15 @@ and quaternions (where a backend exposes orientation) are ``(w, x, y, z)``.
 Tasks see a backend as a :class:`Scene`: markers, and for tasks that handle objects
 (grasping) *bodies*: boxes added to the world by name, free or fixed, whose pose and
 velocity a backend sets and reads, and contacts and friction addressed by robot link or
-body name.
+body name; and fixed *shapes* (boxes, spheres, cylinders) moved between episodes, with the
+clearance of every link from them (obstacles).
 """
 
 from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import ClassVar
@@ -82,6 +83,20 @@ def stable_damping(damping: npt.ArrayLike, inertia: npt.ArrayLike, timestep: flo
         timestep: the physics step (s).
     """
     return np.minimum(np.asarray(damping, dtype=np.float64), np.asarray(inertia, dtype=np.float64) / timestep)
+
+
+#: The shapes of :meth:`Scene.add_shape`, each with the number of sizes it takes.
+SHAPES: Mapping[str, int] = MappingProxyType({"box": 3, "sphere": 1, "cylinder": 2})
+
+
+def shape_size(shape: str, size: Sequence[float]) -> tuple[float, ...]:
+    """``size`` as floats, checked against ``shape`` (see :meth:`Scene.add_shape`)."""
+    if shape not in SHAPES:
+        raise ConfigError(f"shape {shape!r} is not one of {sorted(SHAPES)}")
+    values = tuple(float(v) for v in size)
+    if len(values) != SHAPES[shape] or not all(math.isfinite(v) and v > 0 for v in values):
+        raise ConfigError(f"a {shape} takes {SHAPES[shape]} positive sizes (m), not {list(size)!r}")
+    return values
 
 
 @dataclass(frozen=True)
@@ -211,6 +226,41 @@ class Scene(ABC):
         Read from the last physics step.
         """
         raise self._unsupported("contact queries")
+
+    def add_shape(
+        self,
+        name: str,
+        shape: str,
+        size: Sequence[float],
+        *,
+        rgba: tuple[float, float, float, float] = (0.55, 0.55, 0.6, 1.0),
+        position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        """Add a fixed body called ``name`` that :meth:`set_body_pose` moves: an obstacle.
+
+        ``shape`` is one of :data:`SHAPES`: ``"box"`` (``size`` its three half-extents),
+        ``"sphere"`` (its radius) or ``"cylinder"`` along z (radius, half-length), in m
+        (:func:`shape_size` checks it). It collides with the robot and free bodies, never
+        moves under contact, and its pose changes only through :meth:`set_body_pose`
+        (between episodes). Call before the first reset.
+        """
+        raise self._unsupported("shapes")
+
+    def link_clearances(
+        self, bodies: Sequence[str], q: npt.ArrayLike | None = None, max_distance: float = 0.1
+    ) -> dict[str, FloatArray]:
+        """Signed distance (m) from each moving link of the robot to each of ``bodies``, by link name.
+
+        Each value is an array with one distance per body, in ``bodies`` order: the gap between
+        the link's collision shapes and the body's, negative when they overlap, and
+        ``max_distance`` where the gap is larger (or the link has no collision shape). Links
+        fixed to the base (:attr:`~armreach_core.robot.model.RobotModel.fixed_links`) are left out.
+
+        With ``q`` (joint values in ``robot.joint_names`` order) the distances are those of the
+        arm posed at ``q``, without stepping the physics and leaving the world as it was (a
+        planner's collision check); without it, those of the current state.
+        """
+        raise self._unsupported("clearance queries")
 
     def set_friction(self, name: str, friction: float) -> None:
         """Sliding friction coefficient of a robot link's or a body's collision shapes.

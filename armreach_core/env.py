@@ -182,6 +182,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             self.task: Task = spec.task_class()(self.robot, **task_options)
         except TypeError as exc:
             raise ConfigError(f"bad option for task {task!r}: {exc}") from exc
+        # whether the task ends episodes for reasons of its own (reach never does: no call per step)
+        self._task_ends = type(self.task).ended is not Task.ended
 
         self._action_shape = (self.task.action_size(),)
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=self._action_shape, dtype=np.float32)
@@ -299,7 +301,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self._elapsed += 1
         score = self.task.score(state)
         limit_stop = violated and self.joint_limit_mode == "terminate"
-        terminated = score.success or limit_stop or unstable
+        terminated = score.success or limit_stop or unstable or (self._task_ends and self.task.ended(score.info))
         truncated = not terminated and self._truncate_at is not None and self._elapsed >= self._truncate_at
         info = score.info
         info["joint_limit_violation"] = violated

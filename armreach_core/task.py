@@ -198,6 +198,13 @@ class Task(ABC):
         info["is_success"] = success
         return Score(float(self.compute_reward(achieved, desired, info)), success, info)
 
+    def ended(self, info: dict[str, Any]) -> bool:
+        """Whether the scored state ends the episode without success (a touch of an obstacle).
+
+        Read by the env after :meth:`score`, from the ``info`` it made; the default never ends one.
+        """
+        return False
+
     def demonstrator(self, env: Any) -> Demonstrator | None:
         """A reference controller for this task in ``env`` (the unwrapped env), if the task has one.
 

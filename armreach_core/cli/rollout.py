@@ -9,14 +9,20 @@ from typing import Any
 
 from armreach_core.cli.checks import check_out
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
-from armreach_core.plugins.defaults import DEFAULT_BACKEND
+from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 
 
 def add_parser(sub: Any) -> None:
     parser = sub.add_parser("rollout", help="run one seeded episode and save a rendered PNG")
     parser.add_argument("--backend", default=DEFAULT_BACKEND, help=f"physics backend (default: {DEFAULT_BACKEND})")
     add_robot_arguments(parser)
-    parser.add_argument("--policy", choices=("ik", "random"), default="ik", help="controller (default: ik)")
+    parser.add_argument("--task", default=DEFAULT_TASK, help=f"registered task (default: {DEFAULT_TASK})")
+    parser.add_argument(
+        "--policy",
+        choices=("ik", "reference", "random"),
+        default="ik",
+        help="controller: ik, the task's reference (reach-around: the planner), random (default: ik)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
     parser.add_argument("--max-steps", type=int, default=400, help="step limit (default: 400)")
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: runs/rollout-<time>)")
@@ -37,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
         max_steps=args.max_steps,
         viewer=args.viewer,
         env_kwargs=robot_kwargs(args),
+        task=args.task,
     )
     out = args.out or Path("runs") / time.strftime("rollout-%Y%m%d-%H%M%S")
     png, summary_json = save_rollout(result, out)  # made once the episode ran: an error leaves no folder

@@ -219,6 +219,31 @@ class BackendContract:
         assert touching & set(deep[1])  # a link put 2 cm into the ground, still touching after a step
         assert touching <= set(robot.link_names) - robot.fixed_links
 
+    def test_shapes_move_and_link_clearances_pose_the_arm_without_moving_it(
+        self, world: Backend, robot: RobotModel
+    ) -> None:
+        try:
+            world.add_shape("contract-sphere", "sphere", (0.05,), position=(0.0, 0.0, 5.0))
+            world.add_shape("contract-pole", "cylinder", (0.02, 0.3), position=(0.0, 0.0, 5.0))
+        except NotImplementedError:
+            pytest.skip(f"backend {self.backend!r} has no shapes")
+        world.reset_joints(robot.home)
+        names = ["contract-sphere", "contract-pole"]
+        far = world.link_clearances(names, max_distance=0.2)
+        assert set(far) == set(robot.link_names) - robot.fixed_links
+        assert all(np.all(values == 0.2) for values in far.values())  # both 5 m up: out of range
+        world.set_body_pose("contract-sphere", robot.forward_kinematics(robot.home))  # on the end effector
+        near = world.link_clearances(names, max_distance=0.2)
+        assert min(float(v[0]) for v in near.values()) < 0.0  # a link overlaps it
+        assert all(float(v[1]) == 0.2 for v in near.values())  # the pole is still out of range
+        q = robot.sample_configurations(np.random.default_rng(3), 1)[0]
+        posed = world.link_clearances(names, q=q, max_distance=0.2)
+        assert np.array_equal(world.joint_state()[0], robot.home)  # the world was left as it was
+        world.reset_joints(q)
+        moved = world.link_clearances(names, max_distance=0.2)
+        for link, values in posed.items():
+            np.testing.assert_allclose(values, moved[link], atol=1e-9)
+
     @pytest.mark.parametrize("change", DYNAMICS_CHANGES)
     def test_a_dynamics_change_takes_effect_in_this_world_only(
         self, engine: type[Backend], robot: RobotModel, change: str, request: pytest.FixtureRequest

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from armreach_core.env import ArmEnv
+from armreach_core.errors import ConfigError
 from armreach_core.plugins.defaults import DEFAULT_TASK
 from armreach_core.robot.ik import RESTARTS, IKPolicy
 
@@ -36,36 +37,48 @@ def rollout(
     max_steps: int = 400,
     viewer: bool = False,
     env_kwargs: Mapping[str, Any] | None = None,
+    task: str = DEFAULT_TASK,
 ) -> Rollout:
-    """Run one episode from ``reset(seed=seed)`` with the IK reference (``policy="ik"``) or random actions.
+    """Run one episode from ``reset(seed=seed)`` with the IK reference (``policy="ik"``), the task's
+    own reference controller (``policy="reference"``) or random actions.
 
     Args:
         backend: the physics backend.
-        policy: ``"ik"`` (the planned IK reference) or ``"random"`` (the action space's samples).
+        policy: ``"ik"`` (the planned IK reference), ``"reference"`` (the task's
+            :meth:`~armreach_core.task.Task.demonstrator`: reach's IK, reach-around's planner)
+            or ``"random"`` (the action space's samples).
         seed: seeds the reset and the action space.
         max_steps: the episode's step limit.
         viewer: also show the episode in a live window, in real time.
         env_kwargs: the arm's env arguments (``urdf``, ``home``, ...).
+        task: the registered task.
     """
     env = ArmEnv(
-        DEFAULT_TASK,
+        task,
         backend=backend,
         render_mode="human" if viewer else "rgb_array",
         **dict(env_kwargs or {}),
         max_episode_steps=max_steps,
     )
     try:
-        _, info = env.reset(seed=seed)
+        reference = env.task.demonstrator(env) if policy == "reference" else None
+        if policy == "reference" and reference is None:
+            raise ConfigError(f"task {task!r} has no reference controller; use --policy ik or random")
+        obs, info = env.reset(seed=seed)
         env.action_space.seed(seed)
         ik = IKPolicy(env.robot, env.max_joint_step, restarts=RESTARTS)
+        touches = 0
         frames = [env.backend.render(env.camera)]
         steps, total = 0, 0.0
         while True:
-            if policy == "ik":
+            if reference is not None:
+                action = reference.act(obs)
+            elif policy == "ik":
                 action = ik.act(env.backend.joint_state()[0], env.task.target)  # type: ignore[attr-defined]
             else:
                 action = env.action_space.sample()
-            _, reward, terminated, truncated, info = env.step(action)
+            obs, reward, terminated, truncated, info = env.step(action)
+            touches += int(info.get("collision", False))
             steps += 1
             total += float(reward)
             if steps % FRAME_EVERY == 0:
@@ -85,6 +98,8 @@ def rollout(
         "distance_m": float(info["distance"]),
         "return": total,
     }
+    if "collision" in info:  # a task with obstacles
+        summary["collision_steps"] = touches
     return Rollout(summary=summary, strip=np.concatenate([f for f in picks if f is not None], axis=1))
 
 

@@ -3,7 +3,9 @@
 Episode ``i`` is reset with ``seed + i``, so every algorithm and backend sees the same
 targets. Metrics follow the paper: success rate, steps to goal (mean ± std over
 successes), final reward (mean episode return), and jerk (rad/s³, third finite
-difference of joint angles at the control rate, over successful episodes).
+difference of joint angles at the control rate, over successful episodes). Tasks with
+obstacles add collisions (steps touching one, ``info["collision"]``) and the least
+clearance of each episode (``info["clearance"]``, m).
 """
 
 from __future__ import annotations
@@ -45,11 +47,17 @@ class Episode:
     joint_limit_violations: int
     #: How the episode ended: one of :data:`ENDINGS`.
     ended_by: str = ""
+    #: Steps on which the arm touched an obstacle (tasks that report ``info["collision"]``).
+    collisions: int = 0
+    #: Least link-to-obstacle distance over the episode (m); NaN for tasks without obstacles.
+    min_clearance: float = float("nan")
 
 
 #: How an episode can end: the goal reached, a joint limit (the paper's rule), the step limit,
 #: or a physics blow-up.
 ENDINGS = ("success", "joint_limit", "time_limit", "physics")
+#: One more ending of tasks with obstacles that end an episode at a touch (``info["collision_end"]``).
+COLLISION_END = "collision"
 
 
 def _ending(info: dict[str, Any], truncated: bool) -> str:
@@ -57,6 +65,8 @@ def _ending(info: dict[str, Any], truncated: bool) -> str:
         return "success"
     if info.get("physics_unstable"):
         return "physics"
+    if info.get("collision_end"):
+        return COLLISION_END
     if truncated:
         return "time_limit"
     return "joint_limit" if info.get("joint_limit_violation") else "time_limit"
@@ -95,7 +105,24 @@ class EvaluationResult:
             "seconds": self.seconds,
             "controller": self.source,
             "joint_limit_mode": self.joint_limit_mode,
-            "ended_by": {end: sum(1 for e in self.episodes if e.ended_by == end) for end in ENDINGS},
+            "ended_by": {end: sum(1 for e in self.episodes if e.ended_by == end) for end in self._endings()},
+            **self._collision_summary(),
+        }
+
+    def _endings(self) -> tuple[str, ...]:
+        obstacles = any(np.isfinite(e.min_clearance) for e in self.episodes)
+        return (*ENDINGS, COLLISION_END) if obstacles else ENDINGS
+
+    def _collision_summary(self) -> dict[str, Any]:
+        """Collisions per episode, the share of episodes with any, and the least clearance: tasks with obstacles."""
+        clearances = [e.min_clearance for e in self.episodes if np.isfinite(e.min_clearance)]
+        if not clearances:
+            return {}
+        return {
+            "collisions_per_episode": float(np.mean([e.collisions for e in self.episodes])),
+            "collision_episode_rate": float(np.mean([e.collisions > 0 for e in self.episodes])),
+            "min_clearance_mean": float(np.mean(clearances)),
+            "min_clearance_min": float(np.min(clearances)),
         }
 
 
@@ -126,7 +153,8 @@ def run_episodes(
         for i in range(episodes):
             obs, info = env.reset(seed=seed + i)
             qs = [base.backend.joint_state()[0].copy()]
-            total, violations, steps = 0.0, 0, 0
+            total, violations, steps, collisions = 0.0, 0, 0, 0
+            clearance = float(info.get("clearance", np.nan))
             if on_frame is not None:
                 on_frame(i, base)
             while True:
@@ -134,6 +162,8 @@ def run_episodes(
                 qs.append(base.backend.joint_state()[0].copy())
                 total += float(reward)
                 violations += int(info.get("joint_limit_violation", False))
+                collisions += int(info.get("collision", False))
+                clearance = min(clearance, float(info.get("clearance", np.nan)))
                 steps += 1
                 if on_frame is not None:
                     on_frame(i, base)
@@ -154,6 +184,8 @@ def run_episodes(
                     mean_jerk(q, dt),
                     violations,
                     _ending(info, truncated),
+                    collisions,
+                    clearance,
                 )
             )
     finally:
@@ -304,6 +336,15 @@ def format_summary(summary: dict[str, Any]) -> str:
         ("jerk", spread(summary["jerk_mean"], summary["jerk_std"], 2) + " rad/s³"),
         ("wall time", f"{summary['seconds']:.1f} s"),
     ]
+    if "collision_episode_rate" in summary:
+        rows[-1:-1] = [
+            ("episodes with a collision", f"{100 * summary['collision_episode_rate']:.0f} %"),
+            ("collisions per episode", f"{summary['collisions_per_episode']:.2f}"),
+            (
+                "least clearance",
+                f"{100 * summary['min_clearance_min']:.1f} cm (episode mean {100 * summary['min_clearance_mean']:.1f})",
+            ),
+        ]
     return table(rows)
 
 

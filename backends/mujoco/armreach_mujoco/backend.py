@@ -20,16 +20,18 @@ is in ``docs/mujoco-backend.md``.
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.backend import ArmState, Backend, BodyState, Camera, PhysicsConfig
+from armreach_core.backend import ArmState, Backend, BodyState, Camera, PhysicsConfig, shape_size
 from armreach_core.errors import ArmReachError
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_mujoco import dynamics
+from armreach_mujoco.clearance import Clearance
 from armreach_mujoco.compiled import CompiledModel, clear_cache, compiled_model
 from armreach_mujoco.engine import mujoco
 from armreach_mujoco.render import Renderer
@@ -56,6 +58,7 @@ class MuJoCoBackend(Backend):
         super().__init__(robot, physics, viewer=viewer)
         self._window: LiveViewer | None = None
         self._extras = Extras()
+        self._clearance: Clearance | None = None
         self._closed = False
         self._diverged = False
         self._renderer: Renderer | None = None
@@ -238,8 +241,34 @@ class MuJoCoBackend(Backend):
         )
         self._rebuild(replace(self._extras, boxes=(*self._extras.boxes, box)))
 
+    def add_shape(
+        self,
+        name: str,
+        shape: str,
+        size: Sequence[float],
+        *,
+        rgba: tuple[float, float, float, float] = (0.55, 0.55, 0.6, 1.0),
+        position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        self._live()
+        if name in self._compiled.bodies or any(b.name == name for b in self._extras.boxes):
+            raise ArmReachError(f"a body or link called {name!r} already exists")
+        sizes = (*shape_size(shape, size), 0.0, 0.0)
+        colour = (float(rgba[0]), float(rgba[1]), float(rgba[2]), float(rgba[3]))
+        where = (float(position[0]), float(position[1]), float(position[2]))
+        box = Box(name, (sizes[0], sizes[1], sizes[2]), 0.0, 0.5, colour, where, shape=shape, movable=True)
+        self._rebuild(replace(self._extras, boxes=(*self._extras.boxes, box)))
+
     def free_bodies(self) -> tuple[str, ...]:
         return tuple(self._compiled.free)
+
+    def link_clearances(
+        self, bodies: Sequence[str], q: npt.ArrayLike | None = None, max_distance: float = 0.1
+    ) -> dict[str, FloatArray]:
+        io = self._live()
+        if self._clearance is None or self._clearance.model is not self._model:
+            self._clearance = Clearance(self.robot, self._compiled, self._model)
+        return self._clearance.distances(io.data, bodies, q, max_distance)
 
     def set_body_pose(self, name: str, position: npt.ArrayLike, orientation: npt.ArrayLike = (1, 0, 0, 0)) -> None:
         self._live().set_body_pose(name, position, orientation)

@@ -51,6 +51,7 @@ class CompiledModel:
         bodies: MuJoCo body id by MuJoCo body name (URDF links keep their names).
         mocap: mocap index of each marker, by marker name.
         free: ``(qpos address, dof address)`` of each free box's joint, by box name.
+        movable: mocap index of each movable fixed shape (``add_shape``), by its name.
         held_qpos, held_qvel: addresses of ``robot.held_joints`` in ``qpos`` and ``qvel``.
         held_servos: indices in ``robot.held_joints`` of those held by a motor (the others
             follow their master through a joint equality); held_motors: their motor tendons.
@@ -67,6 +68,7 @@ class CompiledModel:
     held_qvel: Index = field(default_factory=lambda: _index([]))
     held_servos: Index = field(default_factory=lambda: _index([]))
     held_motors: Index = field(default_factory=lambda: _index([]))
+    movable: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}))
 
 
 _cache: OrderedDict[tuple[Any, ...], CompiledModel] = OrderedDict()
@@ -115,6 +117,7 @@ def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> Compiled
         if box.mass > 0:
             joint = model.joint(world.BODY_PREFIX + box.name).id
             free[box.name] = (int(model.jnt_qposadr[joint]), int(model.jnt_dofadr[joint]))
+    movable = {b.name: int(model.body_mocapid[bodies[world.BODY_PREFIX + b.name]]) for b in extras.boxes if b.movable}
     return CompiledModel(
         model=model,
         qpos=qpos,
@@ -127,6 +130,7 @@ def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> Compiled
         held_qvel=held_qvel,
         held_servos=held_servos,
         held_motors=held_motors,
+        movable=MappingProxyType(movable),
     )
 
 

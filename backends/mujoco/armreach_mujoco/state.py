@@ -78,6 +78,11 @@ class StateIO:
             previous = before.mocap.get(name)
             if previous is not None:
                 data.mocap_pos[index] = old.data.mocap_pos[previous]
+        for name, index in self.compiled.movable.items():
+            previous = before.movable.get(name)
+            if previous is not None:
+                data.mocap_pos[index] = old.data.mocap_pos[previous]
+                data.mocap_quat[index] = old.data.mocap_quat[previous]
         mujoco.mj_forward(self.model, data)
 
     def reset_joints(self, q: npt.ArrayLike) -> None:
@@ -101,9 +106,15 @@ class StateIO:
         self.data.mocap_pos[index] = position
 
     def set_body_pose(self, name: str, position: npt.ArrayLike, orientation: npt.ArrayLike) -> None:
-        qadr, vadr = self._free(name)
         quat = np.asarray(orientation, dtype=np.float64)
         data = self.data
+        mocap = self.compiled.movable.get(name)
+        if mocap is not None:  # a fixed shape: its mocap body
+            data.mocap_pos[mocap] = np.asarray(position, dtype=np.float64)
+            data.mocap_quat[mocap] = quat / np.linalg.norm(quat)
+            mujoco.mj_forward(self.model, data)
+            return
+        qadr, vadr = self._free(name)
         data.qpos[qadr : qadr + 3] = np.asarray(position, dtype=np.float64)
         data.qpos[qadr + 3 : qadr + 7] = quat / np.linalg.norm(quat)
         data.qvel[vadr : vadr + 6] = 0.0

@@ -55,6 +55,11 @@ CONTACT_IMPEDANCE = (0.99, 0.99, 0.001, 0.5, 2.0)
 #: PyBullet's lateral friction of a link or body that does not set one (the ground's too).
 DEFAULT_FRICTION = 0.5
 GROUND = "armreach_ground"
+GEOM_TYPES = {
+    "box": mujoco.mjtGeom.mjGEOM_BOX,
+    "sphere": mujoco.mjtGeom.mjGEOM_SPHERE,
+    "cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
+}
 ARM_GEOM_PREFIX = "armreach_geom_"
 
 
@@ -67,12 +72,19 @@ class Marker:
 
 @dataclass(frozen=True)
 class Box:
+    """A box, or with ``shape`` a sphere or cylinder (``half_extents`` then holds its sizes, padded with 0).
+
+    ``movable``: a fixed body that ``set_body_pose`` moves (a mocap body).
+    """
+
     name: str
     half_extents: Vec3
     mass: float
     friction: float
     rgba: RGBA
     position: Vec3
+    shape: str = "box"
+    movable: bool = False
 
 
 @dataclass(frozen=True)
@@ -170,12 +182,12 @@ def add_scene(spec: Any, physics: PhysicsConfig, extras: Extras) -> None:
     if extras.boxes:
         spec.option.noslip_iterations = NOSLIP_ITERATIONS
     for box in extras.boxes:
-        body = world.add_body(name=BODY_PREFIX + box.name, pos=list(box.position))
+        body = world.add_body(name=BODY_PREFIX + box.name, pos=list(box.position), mocap=box.movable)
         if box.mass > 0:
             body.add_freejoint(name=BODY_PREFIX + box.name)
         body.add_geom(
             name=BODY_PREFIX + box.name,
-            type=mujoco.mjtGeom.mjGEOM_BOX,
+            type=GEOM_TYPES[box.shape],
             size=list(box.half_extents),
             rgba=list(box.rgba),
             friction=[box.friction, 0.005, 0.0001],

@@ -18,11 +18,12 @@ an arm reset while lying on the ground steps identically whatever came before).
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.backend import NO_OBJECTS, ArmState, Backend, BodyState, Camera, PhysicsConfig
+from armreach_core.backend import NO_OBJECTS, ArmState, Backend, BodyState, Camera, PhysicsConfig, shape_size
 from armreach_core.errors import ArmReachError
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_pybullet.engine import MAX_CLIENTS, engine_output_to_log, pb
@@ -170,8 +171,34 @@ class PyBulletBackend(Backend):
     ) -> None:
         self._world.add_box(name, half_extents, mass, friction, rgba, position)
 
+    def add_shape(
+        self,
+        name: str,
+        shape: str,
+        size: Sequence[float],
+        *,
+        rgba: tuple[float, float, float, float] = (0.55, 0.55, 0.6, 1.0),
+        position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        self._world.add_shape(name, shape, shape_size(shape, size), rgba, position)
+
     def free_bodies(self) -> tuple[str, ...]:
         return tuple(self._world.free)
+
+    def link_clearances(
+        self, bodies: Sequence[str], q: npt.ArrayLike | None = None, max_distance: float = 0.1
+    ) -> dict[str, FloatArray]:
+        if q is None:
+            return self._world.clearances(list(bodies), max_distance)
+        cid, body = self._client, self._body
+        before = pb.getJointStates(body, self._joints, physicsClientId=cid)
+        try:  # pose the arm's links only: motors, targets and contacts stay as they were
+            for joint, value in zip(self._joints, np.asarray(q, dtype=np.float64), strict=True):
+                pb.resetJointState(body, joint, float(value), 0.0, physicsClientId=cid)
+            return self._world.clearances(list(bodies), max_distance)
+        finally:
+            for joint, (position, velocity, *_) in zip(self._joints, before, strict=True):
+                pb.resetJointState(body, joint, position, velocity, physicsClientId=cid)
 
     def set_body_pose(self, name: str, position: npt.ArrayLike, orientation: npt.ArrayLike = (1, 0, 0, 0)) -> None:
         self._world.set_body_pose(name, position, orientation)

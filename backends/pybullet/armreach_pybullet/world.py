@@ -1,4 +1,4 @@
-"""What a task adds around the arm, by name: boxes, markers; and contacts and friction by name."""
+"""What a task adds around the arm, by name: boxes, shapes, markers; contacts, clearances and friction by name."""
 
 from __future__ import annotations
 
@@ -23,6 +23,8 @@ class World:
         self._bodies: dict[str, int] = {}
         #: The bodies with mass, in the order they were added.
         self.free: list[str] = []
+        #: The fixed shapes that set_body_pose moves (obstacles).
+        self.movable: set[str] = set()
 
     def add_box(
         self,
@@ -52,6 +54,56 @@ class World:
             self.free.append(name)
         self.set_friction(name, friction)
 
+    def add_shape(
+        self,
+        name: str,
+        shape: str,
+        size: tuple[float, ...],
+        rgba: tuple[float, float, float, float],
+        position: tuple[float, float, float],
+    ) -> None:
+        cid = self._client
+        if name in self._bodies or name in self._link_index:
+            raise ArmReachError(f"a body or link called {name!r} already exists")
+        collision: dict[str, float | list[float]]
+        visual: dict[str, float | list[float]]
+        if shape == "box":
+            collision, visual = {"halfExtents": list(size)}, {"halfExtents": list(size)}
+        elif shape == "sphere":
+            collision, visual = {"radius": size[0]}, {"radius": size[0]}
+        else:  # a cylinder along z; PyBullet names its length differently for the two shapes
+            collision, visual = {"radius": size[0], "height": 2 * size[1]}, {"radius": size[0], "length": 2 * size[1]}
+        kind = {"box": pb.GEOM_BOX, "sphere": pb.GEOM_SPHERE, "cylinder": pb.GEOM_CYLINDER}[shape]
+        shape_id = pb.createCollisionShape(kind, physicsClientId=cid, **collision)
+        visual_id = pb.createVisualShape(kind, rgbaColor=list(rgba), physicsClientId=cid, **visual)
+        self._bodies[name] = pb.createMultiBody(
+            baseMass=0.0,
+            baseCollisionShapeIndex=shape_id,
+            baseVisualShapeIndex=visual_id,
+            basePosition=[float(p) for p in position],
+            physicsClientId=cid,
+        )
+        self.movable.add(name)
+
+    def clearances(self, bodies: list[str], max_distance: float) -> dict[str, FloatArray]:
+        """Signed distance from each moving link to each body (``max_distance`` when farther)."""
+        cid, robot, own = self._client, self._robot, self._body
+        ids = [self._body_id(name) for name in bodies]
+        out: dict[str, FloatArray] = {}
+        for link in robot.link_names:
+            index = self._link_index.get(link)
+            if link in robot.fixed_links or index is None:
+                continue
+            values = np.full(len(ids), float(max_distance))
+            for k, body in enumerate(ids):
+                points = pb.getClosestPoints(
+                    own, body, float(max_distance), linkIndexA=index, linkIndexB=-1, physicsClientId=cid
+                )
+                if points:
+                    values[k] = min(values[k], min(float(point[8]) for point in points))
+            out[link] = values
+        return out
+
     def _body_id(self, name: str) -> int:
         try:
             return self._bodies[name]
@@ -68,7 +120,7 @@ class World:
 
     def set_body_pose(self, name: str, position: npt.ArrayLike, orientation: npt.ArrayLike) -> None:
         body, cid = self._body_id(name), self._client
-        if name not in self.free:
+        if name not in self.free and name not in self.movable:
             raise ArmReachError(f"body {name!r} is fixed (mass 0); only free bodies can be moved")
         w, x, y, z = (float(v) for v in np.asarray(orientation, dtype=np.float64))
         pos = [float(v) for v in np.asarray(position, dtype=np.float64)]

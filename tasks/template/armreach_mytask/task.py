@@ -74,7 +74,11 @@ class MyTask(Task):
     # adds a gripper command); the default is one relative joint step per actuated joint.
 
     def setup_scene(self, scene: Scene) -> None:
-        scene.add_marker(MARKER, self.threshold, (0.2, 0.4, 0.9, 0.6))  # bodies: scene.add_box(...)
+        scene.add_marker(MARKER, self.threshold, (0.2, 0.4, 0.9, 0.6))
+        # Bodies are added here too, once: scene.add_box(name, half_extents, mass) (mass 0: fixed),
+        # or scene.add_shape(name, "sphere", (radius,)) for an obstacle that initialize_episode
+        # moves with scene.set_body_pose(name, position); scene.link_clearances([name]) then
+        # gives each link's distance to it (tasks/obstacles does all three).
 
     def initialize_episode(self, scene: Scene, rng: np.random.Generator) -> None:
         self.point = np.array([*rng.uniform(self.low, self.high), self.height])

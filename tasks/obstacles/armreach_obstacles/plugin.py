@@ -1,0 +1,33 @@
+"""The plugin armreach loads from the ``armreach`` entry-point group: the reach-around task."""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+from armreach_core import TaskSpec, hookimpl
+from armreach_core.plugins.specs import Register
+
+#: The episode length of ``armreach/ReachAround-v0`` (the planned reference needs about 40-120 steps).
+MAX_EPISODE_STEPS = 200
+
+
+def presets() -> tuple[Path, ...]:
+    """The presets the task ships (``armreach train --task reach-around --preset reach-around``)."""
+    folder = resources.files("armreach_obstacles.presets")
+    return tuple(Path(str(folder.joinpath(name))) for name in ("reach-around.yaml",))
+
+
+@hookimpl
+def armreach_register_tasks(register: Register) -> None:
+    register(
+        TaskSpec(
+            name="reach-around",
+            env_id="armreach/ReachAround-v0",
+            load="armreach_obstacles.task:ReachAroundTask",
+            max_episode_steps=MAX_EPISODE_STEPS,
+            entry_point="armreach_obstacles.env:ArmReachAroundEnv",
+            description="reach a random target around boxes, spheres and cylinders without touching them",
+            presets=presets(),
+        )
+    )
