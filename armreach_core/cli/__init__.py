@@ -10,6 +10,7 @@ from typing import NoReturn
 from armreach_core.cli import (
     bench,
     evaluate,
+    excite,
     experiment,
     parity,
     plugins,
@@ -18,12 +19,28 @@ from armreach_core.cli import (
     rollout,
     soak,
     sweep,
+    sysid,
     train,
     tune,
 )
 from armreach_core.errors import ArmReachError
 
-COMMANDS = (train, evaluate, robustness, experiment, sweep, tune, rollout, robot, parity, bench, soak, plugins)
+COMMANDS = (
+    train,
+    evaluate,
+    robustness,
+    experiment,
+    sweep,
+    tune,
+    rollout,
+    robot,
+    parity,
+    bench,
+    soak,
+    plugins,
+    excite,
+    sysid,
+)
 
 
 class Parser(argparse.ArgumentParser):
