@@ -182,3 +182,59 @@ def test_sysid_finds_the_latency_and_brings_the_replay_error_down(world: object)
     joint_rms, ee = replay_error(world, [log], result.profile)  # type: ignore[arg-type]
     assert joint_rms == pytest.approx(result.rms_after)
     assert ee == pytest.approx(result.ee_rms_after)
+
+
+def test_an_env_runs_a_profiles_dynamics_and_latency(tmp_path: Path) -> None:
+    from armreach_core.env import ArmEnv
+
+    plain = ArmEnv(backend=BACKENDS[0])
+    joint = plain.robot.joint_names[0]
+    path = save_profile(PhysicsProfile({joint: {"damping": 7.0}}, latency=2), tmp_path / "p.yaml")
+    late = ArmEnv(backend=BACKENDS[0], physics=path)
+    try:
+        assert late.backend.joint_damping(joint) == pytest.approx(7.0)
+        assert plain.backend.joint_damping(joint) != pytest.approx(7.0)
+        action = np.ones(plain.action_space.shape, dtype=np.float32)
+        q0 = late.reset(seed=0)[0]
+        plain.reset(seed=0)
+        moved = [plain.backend.joint_state()[0]]
+        held = [late.backend.joint_state()[0]]
+        for _ in range(3):
+            plain.step(action)
+            late.step(action)
+            moved.append(plain.backend.joint_state()[0])
+            held.append(late.backend.joint_state()[0])
+        assert np.abs(moved[1] - moved[0]).max() > 0.01
+        np.testing.assert_allclose(held[2], held[0], atol=1e-6)  # two steps of latency: nothing arrived yet
+        assert np.abs(held[3] - held[0]).max() > 0.01
+        assert q0 is not None
+    finally:
+        plain.close()
+        late.close()
+
+
+def test_an_env_refuses_a_profile_it_cannot_run(tmp_path: Path) -> None:
+    from armreach_core.env import ArmEnv
+
+    path = save_profile(PhysicsProfile({"no_such_joint": {"damping": 1.0}}), tmp_path / "p.yaml")
+    with pytest.raises(ConfigError, match="not an actuated joint"):
+        ArmEnv(backend=BACKENDS[0], physics=path)
+
+
+def test_a_run_config_carries_a_profile_to_its_envs_and_refuses_a_missing_one(tmp_path: Path) -> None:
+    from armreach_core.env import ArmEnv
+    from armreach_core.rl.agents import env_kwargs
+    from armreach_core.rl.config import resolve_config
+
+    joint = "shoulder_pan_joint"
+    path = save_profile(PhysicsProfile({joint: {"damping": 5.0}}, latency=1), tmp_path / "p.yaml")
+    config = resolve_config(algo="ppo", preset="fast", placement={"physics": str(path)})
+    assert config.env_settings["physics"] == str(path.resolve())
+    env = ArmEnv(**env_kwargs(config))
+    try:
+        assert env.physics_profile is not None and env.physics_profile.latency == 1
+        assert env.backend.joint_damping(joint) == pytest.approx(5.0)
+    finally:
+        env.close()
+    with pytest.raises(ConfigError, match="does not exist"):
+        resolve_config(algo="ppo", preset="fast", placement={"physics": str(tmp_path / "missing.yaml")})

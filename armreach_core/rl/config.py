@@ -259,7 +259,13 @@ def resolve_config(
     settings = loaded.get(task, algo)
     if placement:
         env = dict(settings.get("env", {}))
-        env.update({key: list(value) for key, value in placement.items() if value is not None})
+        env.update(
+            {
+                key: value if isinstance(value, str) else list(value)
+                for key, value in placement.items()
+                if value is not None
+            }
+        )
         settings["env"] = validate_settings(algo, {"env": env}, "arm flags")["env"]
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError(f"--seed must be a non-negative integer, got {seed!r}")

@@ -12,7 +12,9 @@ couplings. Any other log is one window where all values are fitted together.
 
 The spread of a fitted value is its standard error from the fit's Jacobian (the residual's
 variance times ``(J^T J)^-1``); a value with a spread above :data:`IDENTIFIABLE` of itself
-is marked not identifiable by the logs (its motor never saturated, say).
+is marked not identifiable by the logs (its motor never saturated, say). The spread is
+local: it does not see another minimum elsewhere, which is why each joint's first fit starts
+from the best of a coarse grid (:data:`GRID`).
 """
 
 from __future__ import annotations
@@ -38,6 +40,9 @@ FIT_KEYS = ("damping", "friction", "effort")
 DEFAULT_KEYS = ("damping", "friction")
 #: Relative spread above which a value counts as not identifiable from the logs.
 IDENTIFIABLE = 0.1
+#: Starting points tried before a joint's first fit (damping times the URDF's, friction as a
+#: fraction of the effort): the replay error has local minima where damping and friction trade off.
+GRID = {"damping": (1.0, 3.0, 10.0), "friction": (0.0, 0.05, 0.1, 0.2, 0.4)}
 #: Residual (rad) given to a row of a replay that diverged.
 DIVERGED = 1.0
 
@@ -158,8 +163,38 @@ def _fit_block(
     variance = 2.0 * float(result.cost) / dof
     jac = np.asarray(result.jac)
     cov = np.linalg.pinv(jac.T @ jac) * variance
-    spread = {name: float(math.sqrt(max(cov[i, i], 0.0))) * float(scale[i]) for i, name in enumerate(names)}
-    return profile_of(result.x), spread
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return profile_of(result.x), {name: float(std[i] * scale[i]) for i, name in enumerate(names)}
+
+
+def _grid_start(
+    problem: _Problem,
+    current: PhysicsProfile,
+    reference: PhysicsProfile,
+    joint: str,
+    keys: Sequence[str],
+    windows: Sequence[Window],
+    columns: list[int] | None,
+) -> PhysicsProfile:
+    """``current`` with ``joint``'s values set to the best point of :data:`GRID` (keys not fitted keep theirs)."""
+    effort = reference.value(joint, "effort") or 1.0
+    built = reference.value(joint, "damping") or 0.0
+    axes = {
+        "damping": [built * m for m in GRID["damping"]] if "damping" in keys else [current.value(joint, "damping")],
+        "friction": [effort * f for f in GRID["friction"]]
+        if "friction" in keys
+        else [current.value(joint, "friction")],
+    }
+    best: tuple[float, PhysicsProfile] | None = None
+    for damping in axes["damping"]:
+        for friction in axes["friction"]:
+            values = {k: v for k, v in (("damping", damping), ("friction", friction)) if v is not None}
+            candidate = _with(current, {joint: values})
+            error = float(np.mean(problem.residual(candidate, windows, columns) ** 2))
+            if best is None or error < best[0]:
+                best = (error, candidate)
+    assert best is not None
+    return best[1]
 
 
 def _windows(logs: Sequence[JointLog], joints: Sequence[str]) -> dict[str, list[Window]]:
@@ -226,7 +261,8 @@ def identify(
     say("latency (nominal physics): " + ", ".join(f"{k} steps {v:.4f} rad" for k, v in latency_rms.items()))
     best: tuple[float, PhysicsProfile, dict[tuple[str, str], float]] | None = None
     for lat in sorted(latency_rms, key=latency_rms.__getitem__)[:candidates]:
-        current, spread = nominal.with_latency(lat), {}
+        current = nominal.with_latency(lat)
+        spread: dict[tuple[str, str], float] = {}
         blocks = [[j] for j in robot.joint_names] if any(segments(log) for log in logs) else [list(robot.joint_names)]
         for sweep in range(sweeps if len(blocks) > 1 else 1):
             for block in blocks:
@@ -236,6 +272,8 @@ def identify(
                 names = [(j, k) for j in block for k in keys]
                 # on its own segments a joint is matched on its own column: the others' errors are theirs to fit
                 columns = [robot.joint_names.index(j) for j in block] if len(blocks) > 1 else None
+                if sweep == 0 and len(block) == 1:
+                    current = _grid_start(problem, current, reference, block[0], keys, windows, columns)
                 current, found = _fit_block(problem, current, reference, names, windows, max_nfev, columns)
                 spread.update(found)
             say(f"latency {lat}, sweep {sweep + 1}: {np.sqrt(np.mean(problem.residual(current) ** 2)):.5f} rad")
