@@ -10,7 +10,7 @@ $(STAMP): pyproject.toml backends/pybullet/pyproject.toml backends/mujoco/pyproj
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt torch
-	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt -e ".[rl,zoo,ray,dev]" -e backends/pybullet -e backends/mujoco \
+	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt -e ".[rl,zoo,ray,sysid,deploy,dev]" -e backends/pybullet -e backends/mujoco \
 		-e tasks/grasp
 	touch $(STAMP)
 

@@ -12,6 +12,7 @@ from armreach_core.cli import (
     evaluate,
     excite,
     experiment,
+    export,
     parity,
     plugins,
     robot,
@@ -40,6 +41,7 @@ COMMANDS = (
     plugins,
     excite,
     sysid,
+    export,
 )
 
 

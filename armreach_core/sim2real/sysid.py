@@ -42,7 +42,7 @@ DEFAULT_KEYS = ("damping", "friction")
 IDENTIFIABLE = 0.1
 #: Starting points tried before a joint's first fit (damping times the URDF's, friction as a
 #: fraction of the effort): the replay error has local minima where damping and friction trade off.
-GRID = {"damping": (1.0, 3.0, 10.0), "friction": (0.0, 0.05, 0.1, 0.2, 0.4)}
+GRID = {"damping": (1.0, 2.0, 5.0, 12.0), "friction": (0.0, 0.06, 0.15, 0.35)}
 #: Residual (rad) given to a row of a replay that diverged.
 DIVERGED = 1.0
 
@@ -276,10 +276,10 @@ def identify(
                     current = _grid_start(problem, current, reference, block[0], keys, windows, columns)
                 current, found = _fit_block(problem, current, reference, names, windows, max_nfev, columns)
                 spread.update(found)
-            say(f"latency {lat}, sweep {sweep + 1}: {np.sqrt(np.mean(problem.residual(current) ** 2)):.5f} rad")
-        rms = float(np.sqrt(np.mean(problem.residual(current) ** 2)))
-        if best is None or rms < best[0]:
-            best = (rms, current, spread)
+            rms = float(np.sqrt(np.mean(problem.residual(current) ** 2)))
+            say(f"latency {lat}, sweep {sweep + 1}: {rms:.5f} rad")
+            if best is None or rms < best[0]:  # a later sweep may trade one joint's fit for another's
+                best = (rms, current, dict(spread))
     assert best is not None
     _, fitted, spread = best
     table: dict[str, dict[str, float]] = {}
