@@ -238,3 +238,65 @@ def test_a_run_config_carries_a_profile_to_its_envs_and_refuses_a_missing_one(tm
         env.close()
     with pytest.raises(ConfigError, match="does not exist"):
         resolve_config(algo="ppo", preset="fast", placement={"physics": str(tmp_path / "missing.yaml")})
+
+
+def _urdf_damping(robot: object) -> dict[str, float]:
+    from armreach_core.robot.urdf import read_urdf
+
+    joints = read_urdf(robot.urdf_path).model.robot.joints  # type: ignore[attr-defined]
+    return {j.name: float(j.dynamics.damping or 0.0) if j.dynamics is not None else 0.0 for j in joints}
+
+
+#: Values the full fit does not bring within 20 % of the truth (measured, see docs/sim2real.md):
+#: damping of the two joints that carry the arm, which gravity loads change as the arm moves, and
+#: the last wrist, whose damping MuJoCo bounds by M_ii/dt (2e-2) and whose friction the
+#: replay barely sees.
+NOT_RECOVERED = {
+    ("shoulder_lift_joint", "damping"),
+    ("elbow_joint", "damping"),
+    ("wrist_3_joint", "damping"),
+    ("wrist_3_joint", "friction"),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.skipif("mujoco" not in BACKENDS, reason="MuJoCo is not installed")
+def test_sysid_recovers_changed_physics_from_logs_of_one_engine() -> None:
+    """Damping x3, friction 20 % of the effort and one step of latency, on MuJoCo: fit on one
+    excitation log, score on another (different amplitudes and chirp)."""
+    fit_world = make_backend(backend="mujoco")
+    truth_world = make_backend(backend="mujoco")
+    try:
+        robot = truth_world.robot
+        nominal = nominal_profile(truth_world)
+        urdf = _urdf_damping(robot)
+        # a damping MuJoCo capped at M_ii/dt when building stays as built: above it its explicit damping rings
+        truth = PhysicsProfile(
+            {
+                j: {
+                    "damping": 3 * v["damping"] if v["damping"] == pytest.approx(urdf[j]) else v["damping"],
+                    "friction": 0.2 * truth_world.effort_limit(j),
+                }
+                for j, v in nominal.joints.items()
+            },
+            latency=1,
+        )
+        apply_profile(truth_world, truth)
+        dt = truth_world.physics.control_dt
+        train = record(truth_world, excitation_plan(robot, robot.home, dt), latency=1)
+        held = record(truth_world, excitation_plan(robot, robot.home, dt, Excitation(0.4, f_high=1.0)), latency=1)
+        result = identify(fit_world, [train])
+        before = replay_error(fit_world, [held], nominal)
+        after = replay_error(fit_world, [held], result.profile)
+    finally:
+        fit_world.close()
+        truth_world.close()
+    assert result.profile.latency == 1
+    assert after[0] <= 0.25 * before[0]
+    assert after[1] < 0.002  # end-effector RMS, m
+    for joint in robot.joint_names:
+        for key in ("damping", "friction"):
+            if (joint, key) in NOT_RECOVERED:
+                continue
+            fitted, true = result.profile.value(joint, key), truth.value(joint, key)
+            assert fitted == pytest.approx(true, rel=0.2), f"{joint} {key}: {fitted} against {true}"
