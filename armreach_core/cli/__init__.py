@@ -9,6 +9,7 @@ from typing import NoReturn
 
 from armreach_core.cli import (
     bench,
+    deploy,
     evaluate,
     excite,
     experiment,
@@ -42,6 +43,7 @@ COMMANDS = (
     excite,
     sysid,
     export,
+    deploy,
 )
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from armreach_core.cli.robot_args import add_robot_arguments, arm_spec
+from armreach_core.plugins.defaults import DEFAULT_BACKEND
 
 
 def add_parser(sub: Any) -> None:
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     )
     profile = load_profile(args.physics) if args.physics else None
     world = make_backend(
-        arm_spec(args), args.play or "pybullet", timestep=args.timestep, substeps=args.substeps, profile=profile
+        arm_spec(args), args.play or DEFAULT_BACKEND, timestep=args.timestep, substeps=args.substeps, profile=profile
     )
     try:
         robot = world.robot

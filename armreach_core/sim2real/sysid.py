@@ -125,7 +125,8 @@ def _bounds(nominal: PhysicsProfile, joint: str, key: str) -> tuple[float, float
 
 
 def _with(profile: PhysicsProfile, values: dict[str, dict[str, float]]) -> PhysicsProfile:
-    joints = {j: {**profile.joints.get(j, {}), **values.get(j, {})} for j in {*profile.joints, *values}}
+    names = [*profile.joints, *(j for j in values if j not in profile.joints)]  # the arm's order
+    joints = {j: {**profile.joints.get(j, {}), **values.get(j, {})} for j in names}
     return PhysicsProfile(joints, profile.latency, profile.spread, profile.arm, profile.backend)
 
 
