@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 from collections.abc import Callable
 from pathlib import Path
 
@@ -16,7 +18,7 @@ from armreach_core.sim2real.driver import Driver, Reading, available_drivers, lo
 from armreach_core.sim2real.joint_log import read_joint_log
 from armreach_core.sim2real.runtime import PolicyRuntime
 from armreach_core.sim2real.safety import SafetyLayer
-from tests.conftest import TrainedRun
+from tests.conftest import BACKENDS, TrainedRun
 
 pytestmark = pytest.mark.training
 pytest.importorskip("onnx")
@@ -99,3 +101,28 @@ def test_deploy_through_the_sim_driver_writes_a_joint_log(
     logged = read_joint_log(log)
     assert logged.position is not None and logged.steps >= 10
     assert logged.metadata["kind"] == "deploy"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif("mujoco" not in BACKENDS, reason="MuJoCo is not installed")
+def test_a_fast_policy_from_pybullet_reaches_targets_through_the_sim_driver_on_mujoco(tmp_path: Path) -> None:
+    """The stand-in arm: a ``fast`` PPO trained on PyBullet, deployed on MuJoCo with one step of latency."""
+    run = tmp_path / "fast"
+    argv = ["train", "--preset", "fast", "--algo", "ppo", "--backend", "pybullet", "--steps", "120000"]
+    assert main([*argv, "--out", str(run)]) == 0
+    argv = ["deploy", str(run), "--driver", "sim", "--driver-option", "backend=mujoco", "--driver-option", "latency=1"]
+    argv += [
+        "--driver-option",
+        "speed=2",
+        "--targets",
+        "20",
+        "--max-steps",
+        "100",
+        "--joint-log",
+        str(tmp_path / "j.npz"),
+    ]
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(argv) == 0
+    reached = sum("reached in" in line for line in out.getvalue().splitlines())
+    assert reached >= 18, out.getvalue()  # 90 % of 20 targets

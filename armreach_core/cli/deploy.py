@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -81,12 +82,12 @@ def run(args: argparse.Namespace) -> int:
     log_path = args.joint_log or args.run_dir / "deploy" / "joints.npz"
     if result.log is not None:
         write_joint_log(result.log, log_path)
+    counts = ", ".join(f"{r} {n}" for r, n in sorted(Counter(t.rule for t in result.trips).items()))
     cycles = sorted(result.cycle_s)
     p99 = cycles[int(0.99 * (len(cycles) - 1))] * 1e3 if cycles else float("nan")
     print(
         f"reached {sum(result.reached)}/{len(result.reached)} targets; safety trips {len(result.trips)} "
-        f"({', '.join(sorted({t.rule for t in result.trips})) or 'none'}); cycle p99 {p99:.1f} ms"
-        + (f"; stopped by {result.stopped}" if result.stopped else "")
+        f"({counts or 'none'}); cycle p99 {p99:.1f} ms" + (f"; stopped by {result.stopped}" if result.stopped else "")
     )
     print(f"joint log: {log_path}")
     return 0 if not result.stopped else 1

@@ -4,7 +4,8 @@ Each control period: read the joint state, build the observation the policy was 
 (the task's own observation, from the measured joints and the URDF's forward kinematics),
 ask the policy for an action, turn it into a joint target as the env does, let the
 :class:`~armreach_core.sim2real.safety.SafetyLayer` check and filter it, send it, log the
-row, and sleep to the next period. Targets are drawn as the env draws them (``reset(seed)``
+row, and sleep to the next period. Before each target the arm is brought back home (the
+pose every training episode started from). Targets are drawn as the env draws them (``reset(seed)``
 of a twin env built from the policy card, which never steps); a target counts as reached
 when the task scores the measured state a success. Ctrl-C holds the arm and stops.
 """
@@ -25,6 +26,9 @@ from armreach_core.sim2real.driver import Driver
 from armreach_core.sim2real.joint_log import JointLog
 from armreach_core.sim2real.runtime import PolicyRuntime
 from armreach_core.sim2real.safety import SafetyLayer, Trip
+
+#: How near home (rad or m, every joint) the arm must be before the next target starts.
+HOME_TOLERANCE = 0.02
 
 
 @dataclass
@@ -60,8 +64,13 @@ def deploy(
     seed: int = 0,
     clock: Callable[[], float] = time.perf_counter,
     progress: Callable[[int, bool, int], None] | None = None,
+    home_steps: int = 120,
 ) -> DeployResult:
-    """Drive ``driver``'s arm to ``targets`` targets, each within ``max_steps`` control periods."""
+    """Drive ``driver``'s arm to ``targets`` targets, each within ``max_steps`` control periods.
+
+    Before each target the arm goes back to the card's home pose (at most ``home_steps``
+    periods, through the safety layer; 0: start each target where the last one ended).
+    """
     robot, dt = env.robot, safety.control_dt
     result = DeployResult()
     rows: list[tuple[float, Any, Any, Any]] = []
@@ -71,8 +80,8 @@ def deploy(
     try:
         for k in range(targets):
             env.reset(seed=seed + k)
-            reached, taken = False, 0
-            for taken in range(1, max_steps + 1):  # noqa: B007 - read after the loop
+            reached, taken, homing = False, 0, home_steps
+            while taken < max_steps:
                 t0 = clock()
                 reading = driver.read()
                 q = reading.position
@@ -80,7 +89,10 @@ def deploy(
                 finite = bool(np.isfinite(q).all() and np.isfinite(qd).all())
                 state = ArmState(q, qd, robot.forward_kinematics(q) if finite else np.full(3, np.nan))
                 wanted = None
-                if finite:
+                if finite and homing > 0 and np.abs(q - robot.home).max() > HOME_TOLERANCE:
+                    wanted, homing = robot.home, homing - 1  # back home first, as every episode starts there
+                elif finite:
+                    homing, taken = 0, taken + 1
                     if env.task.score(state).success:
                         reached = True
                         break
