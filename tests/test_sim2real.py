@@ -300,3 +300,14 @@ def test_sysid_recovers_changed_physics_from_logs_of_one_engine() -> None:
                 continue
             fitted, true = result.profile.value(joint, key), truth.value(joint, key)
             assert fitted == pytest.approx(true, rel=0.2), f"{joint} {key}: {fitted} against {true}"
+
+
+def test_randomization_ranges_are_centred_on_the_profile_and_widen_with_its_spread() -> None:
+    from armreach_core.perturb import Randomization
+    from armreach_core.sim2real.profile import randomization_ranges
+
+    tight = PhysicsProfile({"a": {"damping": 2.0}}, latency=1, spread={"a": {"damping": 0.02}})
+    loose = PhysicsProfile({"a": {"damping": 2.0}}, latency=1, spread={"a": {"damping": 0.4}})
+    assert randomization_ranges(tight) == {"damping": [0.9, 1.1], "latency": [1, 1]}  # the floor: 5 %
+    assert randomization_ranges(loose)["damping"] == [0.6, 1.4]
+    Randomization.parse(randomization_ranges(loose))  # a preset's randomize takes it as it is

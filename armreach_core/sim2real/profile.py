@@ -119,6 +119,29 @@ class PhysicsProfile:
         )
 
 
+def randomization_ranges(profile: PhysicsProfile, width: float = 2.0, floor: float = 0.05) -> dict[str, list[float]]:
+    """Domain-randomization ranges centred on ``profile``, from its fit's spread, for a preset's ``randomize``.
+
+    The env runs the profile's values, and :class:`~armreach_core.perturb.PerturbWrapper` scales
+    the values the env runs, so the ranges are scales around 1: ``damping`` and ``effort`` over
+    ``1 ± width × r``, where ``r`` is the largest relative spread of that value over the joints
+    (at least ``floor``, at most 0.5); ``latency`` is the profile's. ``friction`` is left out: the
+    wrapper's friction is a share of the effort that would replace the profile's.
+    """
+    ranges: dict[str, list[float]] = {}
+    for key in ("damping", "effort"):
+        relative = [
+            spread[key] / values[key]
+            for joint, spread in profile.spread.items()
+            if key in spread and (values := profile.joints.get(joint, {})).get(key)
+        ]
+        if relative:
+            r = min(max(max(relative), floor), 0.5)
+            ranges[key] = [round(1.0 - width * r, 4), round(1.0 + width * r, 4)]
+    ranges["latency"] = [profile.latency, profile.latency]
+    return ranges
+
+
 def load_profile(path: str | os.PathLike[str] | PhysicsProfile) -> PhysicsProfile:
     """A profile from a YAML file (or the profile itself); ConfigError saying what is wrong."""
     if isinstance(path, PhysicsProfile):
@@ -170,4 +193,13 @@ def apply_profile(backend: Backend, profile: PhysicsProfile) -> None:
                 ) from None
 
 
-__all__ = ["FORMAT", "JOINT_KEYS", "VERSION", "PhysicsProfile", "apply_profile", "load_profile", "save_profile"]
+__all__ = [
+    "FORMAT",
+    "JOINT_KEYS",
+    "VERSION",
+    "PhysicsProfile",
+    "apply_profile",
+    "load_profile",
+    "randomization_ranges",
+    "save_profile",
+]

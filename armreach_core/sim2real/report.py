@@ -12,7 +12,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from armreach_core.sim2real.profile import save_profile
+from armreach_core.sim2real.profile import randomization_ranges, save_profile
 from armreach_core.sim2real.sysid import Identification
 
 
@@ -38,6 +38,7 @@ def summary(result: Identification, held_out: dict[str, tuple[float, float]] | N
         "fit_rms_rad": {"before": result.rms_before, "after": result.rms_after},
         "fit_ee_rms_m": {"before": result.ee_rms_before, "after": result.ee_rms_after},
         "values": values,
+        "randomize": randomization_ranges(result.profile),
     }
     if held_out:
         data["held_out_rms_rad"] = {k: v[0] for k, v in held_out.items()}
@@ -65,6 +66,11 @@ def _markdown(data: dict[str, Any]) -> str:
             f"| held-out logs, joints (rad) | {rad['before']:.5f} | {rad['after']:.5f} |",
             f"| held-out logs, end effector (mm) | {ee['before'] * 1e3:.2f} | {ee['after'] * 1e3:.2f} |",
         ]
+    lines += [
+        "",
+        "Domain randomization centred on this profile (train with `--physics` and a preset's `env.randomize`):",
+        f"`{json.dumps(data['randomize'])}`.",
+    ]
     lines += ["", "| joint | value | nominal | fitted | spread | identifiable |", "|---|---|---|---|---|---|"]
     for joint, values in data["values"].items():
         for key, v in values.items():
