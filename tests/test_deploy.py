@@ -126,3 +126,22 @@ def test_a_fast_policy_from_pybullet_reaches_targets_through_the_sim_driver_on_m
         assert main(argv) == 0
     reached = sum("reached in" in line for line in out.getvalue().splitlines())
     assert reached >= 18, out.getvalue()  # 90 % of 20 targets
+
+
+def test_shadow_mode_sends_nothing_and_finds_where_the_twin_parts_from_a_held_arm(
+    exported: Path, tmp_path: Path
+) -> None:
+    from armreach_core.sim2real.shadow import plot_shadow, shadow
+
+    policy = PolicyRuntime(exported)
+    env = twin_env(policy.card, "pybullet")
+    try:
+        driver = ScriptedDriver(env.robot, 1e-3)  # an arm held still by its own controller: the twin moves off
+        result = shadow(policy, driver, env, steps=40, seed=3)
+    finally:
+        env.close()
+    assert driver.sent == []
+    assert np.abs(result.live - env.robot.home).max() == 0.0
+    assert result.parted_at is not None and result.gap_m[result.parted_at] > 0.02
+    assert result.gap_m[0] == pytest.approx(0.0, abs=1e-9)  # the twin starts at the live pose
+    assert plot_shadow(result, env.robot.joint_names, tmp_path / "shadow.png").stat().st_size > 10_000

@@ -39,6 +39,9 @@ def add_parser(sub: Any) -> None:
     parser.add_argument("--speed-fraction", type=float, default=0.5, help="speed cap, share of URDF limits (0.5)")
     parser.add_argument("--backend", default=DEFAULT_BACKEND, help="backend of the twin env that draws targets")
     parser.add_argument("--joint-log", type=Path, default=None, help="joint log (default: RUN/deploy/joints.npz)")
+    parser.add_argument(
+        "--shadow", action="store_true", help="command nothing: the policy on the live state beside a simulated twin"
+    )
     parser.add_argument("--trust", action="store_true", help="load a run folder made elsewhere (it is unpickled)")
     parser.set_defaults(run=run)
 
@@ -66,6 +69,8 @@ def run(args: argparse.Namespace) -> int:
             driver = driver_class(env.robot, dt, **dict(args.driver_option))
         except TypeError as exc:
             raise ConfigError(f"driver {args.driver!r} does not take these options: {exc}") from None
+        if args.shadow:
+            return _shadow(args, policy, driver, env)
         with driver:
             result = deploy(
                 policy,
@@ -91,3 +96,21 @@ def run(args: argparse.Namespace) -> int:
     )
     print(f"joint log: {log_path}")
     return 0 if not result.stopped else 1
+
+
+def _shadow(args: argparse.Namespace, policy: Any, driver: Any, env: Any) -> int:
+    import json
+
+    from armreach_core.sim2real.shadow import plot_shadow, shadow
+
+    with driver:
+        result = shadow(policy, driver, env, steps=args.max_steps, seed=args.seed)
+    out = args.run_dir / "shadow"
+    out.mkdir(parents=True, exist_ok=True)
+    png = plot_shadow(result, env.robot.joint_names, out / "shadow.png")
+    largest = float(result.gap_m.max())
+    summary = {"steps": len(result.gap_m), "parted_at": result.parted_at, "max_gap_m": largest}
+    (out / "shadow.json").write_text(json.dumps(summary, indent=2) + "\n")
+    where = f"they part at step {result.parted_at}" if result.parted_at is not None else "they never part"
+    print(f"shadow: nothing sent; {where} (largest gap {largest * 1e3:.1f} mm); {png}")
+    return 0
