@@ -311,3 +311,14 @@ def test_randomization_ranges_are_centred_on_the_profile_and_widen_with_its_spre
     assert randomization_ranges(tight) == {"damping": [0.9, 1.1], "latency": [1, 1]}  # the floor: 5 %
     assert randomization_ranges(loose)["damping"] == [0.6, 1.4]
     Randomization.parse(randomization_ranges(loose))  # a preset's randomize takes it as it is
+
+
+def test_a_log_without_segments_is_cut_where_the_arm_rests() -> None:
+    from armreach_core.sim2real.sysid import rest_windows
+
+    still, move = np.zeros(30), np.linspace(0.0, 1.0, 30)
+    q = np.concatenate([still, move, np.ones(30), 1.0 - move, still])[:, None]
+    log = JointLog(("a",), np.arange(len(q)) * DT, q, q)
+    windows = rest_windows(log)
+    assert windows == [(0, 30), (30, 90), (90, 150)]  # each window starts at rest, at a move
+    assert rest_windows(JointLog(("a",), np.arange(20) * DT, q[:20], q[:20])) == [(0, 20)]

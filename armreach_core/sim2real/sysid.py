@@ -5,10 +5,12 @@ and the simulated joint positions are matched to the logged ones by scipy's
 ``least_squares`` (trust region, bounded) over each joint's damping, Coulomb friction and
 effort bound; the control latency, a whole number of steps, is found by trying each one.
 
-An excitation log (``armreach excite``) carries one segment per joint, each starting at
-rest at home: each joint's values are then fitted on its own segment (with the other joints'
-current values), which is fast and well conditioned; two sweeps over the joints settle the
-couplings. Any other log is one window where all values are fitted together.
+Each joint's values are fitted in turn (with the other joints' current values), matched on
+its own column, which is fast and well conditioned; two sweeps over the joints settle the
+couplings. An excitation log (``armreach excite``) carries one segment per joint, each
+starting at rest at home, and a joint is fitted on its own segment; any other log is cut
+where the arm rests (:func:`rest_windows`), since a replay starts from rest, and every
+joint is fitted on all of it.
 
 The spread of a fitted value is its standard error from the fit's Jacobian (the residual's
 variance times ``(J^T J)^-1``); a value with a spread above :data:`IDENTIFIABLE` of itself
@@ -198,8 +200,22 @@ def _grid_start(
     return best[1]
 
 
+def rest_windows(log: JointLog, still: float = 1e-3, hold: int = 3, least: int = 24) -> list[tuple[int, int]]:
+    """Rows ``(start, stop)`` of a log cut where the arm is at rest (no joint moved more than
+    ``still`` over ``hold`` rows), so that each replay starts, as it assumes, from rest; the whole
+    log when it never rests. Windows shorter than ``least`` rows are merged into the one before."""
+    q = log.require_position("sysid")
+    moved = np.abs(np.diff(q, axis=0)).max(axis=1)
+    starts = [0]
+    for k in range(hold, log.steps - least):
+        at_rest = bool((moved[k - hold : k] < still).all())
+        if at_rest and moved[k] >= still and k - starts[-1] >= least:
+            starts.append(k)
+    return list(zip(starts, [*starts[1:], log.steps], strict=True))
+
+
 def _windows(logs: Sequence[JointLog], joints: Sequence[str]) -> dict[str, list[Window]]:
-    """Each joint's windows: its segments of excitation logs, or whole logs."""
+    """Each joint's windows: its segments of excitation logs, or a log's windows from rest."""
     found: dict[str, list[Window]] = {j: [] for j in joints}
     for i, log in enumerate(logs):
         parts = segments(log)
@@ -208,7 +224,7 @@ def _windows(logs: Sequence[JointLog], joints: Sequence[str]) -> dict[str, list[
                 if j in parts:
                     found[j].append(Window(i, *parts[j]))
             else:
-                found[j].append(Window(i, 0, log.steps))
+                found[j] += [Window(i, start, stop) for start, stop in rest_windows(log)]
     return found
 
 
@@ -264,8 +280,8 @@ def identify(
     for lat in sorted(latency_rms, key=latency_rms.__getitem__)[:candidates]:
         current = nominal.with_latency(lat)
         spread: dict[tuple[str, str], float] = {}
-        blocks = [[j] for j in robot.joint_names] if any(segments(log) for log in logs) else [list(robot.joint_names)]
-        for sweep in range(sweeps if len(blocks) > 1 else 1):
+        blocks = [[j] for j in robot.joint_names]
+        for sweep in range(sweeps):
             for block in blocks:
                 windows = [w for j in block for w in by_joint[j]]
                 if not windows:
@@ -323,4 +339,13 @@ def replay_error(backend: Backend, logs: Sequence[JointLog], profile: PhysicsPro
     return _rms(simulated, logged), ee_rms(backend, simulated, logged)
 
 
-__all__ = ["DEFAULT_KEYS", "FIT_KEYS", "Identification", "ee_rms", "identify", "nominal_profile", "replay_error"]
+__all__ = [
+    "DEFAULT_KEYS",
+    "FIT_KEYS",
+    "Identification",
+    "ee_rms",
+    "identify",
+    "nominal_profile",
+    "replay_error",
+    "rest_windows",
+]
