@@ -280,6 +280,8 @@ def identify(
     for lat in sorted(latency_rms, key=latency_rms.__getitem__)[:candidates]:
         current = nominal.with_latency(lat)
         spread: dict[tuple[str, str], float] = {}
+        if best is None or latency_rms[lat] < best[0]:  # a fit that only chases noise does not replace it
+            best = (latency_rms[lat], current, {})
         blocks = [[j] for j in robot.joint_names]
         for sweep in range(sweeps):
             for block in blocks:
