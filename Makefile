@@ -6,12 +6,13 @@ STAMP := $(VENV)/.installed
 
 .PHONY: install system-deps test test-slow test-no-mujoco test-py310 test-all lint demo bench clean
 
-$(STAMP): pyproject.toml backends/pybullet/pyproject.toml backends/mujoco/pyproject.toml tasks/grasp/pyproject.toml tasks/obstacles/pyproject.toml constraints-cpu.txt
+$(STAMP): pyproject.toml backends/pybullet/pyproject.toml backends/mujoco/pyproject.toml tasks/grasp/pyproject.toml \
+		tasks/obstacles/pyproject.toml drivers/template/pyproject.toml constraints-cpu.txt
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt torch
-	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt -e ".[rl,zoo,ray,dev]" -e backends/pybullet -e backends/mujoco \
-		-e tasks/grasp -e tasks/obstacles
+	$(BIN)/python -m pip install --quiet -c constraints-cpu.txt -e ".[rl,zoo,ray,sysid,deploy,dev]" -e backends/pybullet -e backends/mujoco \
+		-e tasks/grasp -e tasks/obstacles -e drivers/template
 	touch $(STAMP)
 
 # A virtual display for the live-window (render_mode="human") tests, on Debian-like machines where we are root.

@@ -11,6 +11,7 @@ import math
 import os
 import sys
 import time
+from collections import deque
 from collections.abc import Mapping
 from typing import Any, SupportsFloat
 
@@ -25,6 +26,7 @@ from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.plugins.lookup import load_backend_class, load_robot, resolve_arm, task_spec
 from armreach_core.robot.factory import build_robot
 from armreach_core.robot.spec import ArmSpec
+from armreach_core.sim2real.profile import PhysicsProfile, apply_profile, load_profile
 from armreach_core.task import Task
 
 __all__ = ["JOINT_LIMIT_MODES", "STATE_LIMIT", "ArmEnv", "load_backend_class", "load_robot"]
@@ -89,6 +91,11 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         arm: the arm as one :class:`~armreach_core.robot.spec.ArmSpec`, instead of ``urdf``,
             ``robot``, ``ee_link``, ``home``, ``tool_joints``, ``base_position``,
             ``base_orientation`` and ``allow_external_meshes``.
+        physics: a physics profile (a YAML path or a
+            :class:`~armreach_core.sim2real.profile.PhysicsProfile`, e.g. from ``armreach sysid``):
+            its per-joint damping, friction and effort replace the URDF's, and its latency
+            delays each joint target by that many control steps (the arm holds its reset pose
+            until the first arrives). Default none: the URDF's dynamics, no latency.
         **task_options: passed to the task.
     """
 
@@ -121,6 +128,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         xacro_args: Mapping[str, Any] | None = None,
         allow_xacro_env: bool | None = None,
         arm: ArmSpec | None = None,
+        physics: str | os.PathLike[str] | PhysicsProfile | None = None,
         **task_options: Any,
     ) -> None:
         spec = task_spec(task)
@@ -204,6 +212,15 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         except Exception as exc:  # the engine's own exception: name the arm, a link and the fix
             raise engine_failure(self.robot, backend, "building", exc) from None
         self._shown_at = 0.0  # when the live window last showed a step (render_mode="human")
+        #: The physics profile the env runs (None: the URDF's dynamics).
+        self.physics_profile = load_profile(physics) if physics is not None else None
+        self._pending: deque[npt.NDArray[np.float64]] = deque()  # targets on their way (profile latency)
+        if self.physics_profile is not None:
+            try:
+                apply_profile(self._backend, self.physics_profile)
+            except ArmReachError:
+                self._backend.close()
+                raise
         self.task.setup_scene(self._backend)
         self._state: ArmState | None = None
         self._elapsed = 0
@@ -274,6 +291,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self._state = state
         self._elapsed = 0
         self._truncate_at = self.max_episode_steps if self.spec is None else None
+        if self.physics_profile is not None:
+            self._pending = deque([state.q.copy()] * self.physics_profile.latency)
         info = self.task.score(state).info
         if unstable:
             info["physics_unstable"] = True
@@ -289,6 +308,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         clipped = np.minimum(np.maximum(target, self.robot.lower), self.robot.upper)
         excess = target - clipped
         violated = bool(excess.dot(excess) > 0.0)  # one call instead of two comparisons and reductions
+        if self._pending:  # a profile's latency: the target sent now was chosen that many steps ago
+            self._pending.append(clipped)
+            clipped = self._pending.popleft()
         try:
             backend.set_joint_targets(clipped)
             backend.step()

@@ -9,8 +9,11 @@ from typing import NoReturn
 
 from armreach_core.cli import (
     bench,
+    deploy,
     evaluate,
+    excite,
     experiment,
+    export,
     parity,
     plugins,
     robot,
@@ -18,12 +21,30 @@ from armreach_core.cli import (
     rollout,
     soak,
     sweep,
+    sysid,
     train,
     tune,
 )
 from armreach_core.errors import ArmReachError
 
-COMMANDS = (train, evaluate, robustness, experiment, sweep, tune, rollout, robot, parity, bench, soak, plugins)
+COMMANDS = (
+    train,
+    evaluate,
+    robustness,
+    experiment,
+    sweep,
+    tune,
+    rollout,
+    robot,
+    parity,
+    bench,
+    soak,
+    plugins,
+    excite,
+    sysid,
+    export,
+    deploy,
+)
 
 
 class Parser(argparse.ArgumentParser):

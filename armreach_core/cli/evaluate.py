@@ -35,6 +35,9 @@ def add_parser(sub: Any) -> None:
         "--viewer", action="store_true", help="watch the episodes in a live window (needs a display); saves nothing"
     )
     add_robot_arguments(parser, of_run=True)
+    parser.add_argument(
+        "--physics", default=None, metavar="PROFILE", help="evaluate on a fitted physics profile (armreach sysid)"
+    )
     parser.set_defaults(run=run)
 
 
@@ -51,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         trust=args.trust,
         viewer=args.viewer,
         joint_limit_mode=args.joint_limit_mode,
-        arm=robot_kwargs(args),
+        arm={**robot_kwargs(args), **({"physics": args.physics} if args.physics else {})},
     )
     if args.viewer:
         successes = sum(1 for episode in evaluation.episodes if episode.success)
@@ -59,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     clip = "-clip" if args.joint_limit_mode == "clip" else ""
     other_arm = "-arm" if robot_kwargs(args) else ""  # never over the run's own evaluation
+    other_arm += "-physics" if args.physics else ""
     out = args.out or args.run_dir / f"eval-{evaluation.backend}{clip}{other_arm}"
     summary = save_evaluation(evaluation, out)
     log_to_tensorboard(args.run_dir, summary)

@@ -29,6 +29,9 @@ def add_parser(sub: Any) -> None:
     parser.add_argument(
         "--trust", action="store_true", help="load a run another user owns or may write to (its files are pickles)"
     )
+    parser.add_argument(
+        "--physics", default=None, metavar="PROFILE", help="perturb around a fitted physics profile (armreach sysid)"
+    )
     parser.set_defaults(run=run)
 
 
@@ -54,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
         max_episode_steps=args.max_episode_steps,
         trust=args.trust,
         progress=show,
+        physics=args.physics,
     )
     out = args.out or args.run_dir / f"robustness-{backend}"
     write_outputs(cells, out, title=f"{args.run_dir.name} on {backend}")

@@ -29,6 +29,13 @@ def add_parser(sub: Any) -> None:
     parser.add_argument(
         "--viewer", action="store_true", help="also show the episode in a live window, in real time (needs a display)"
     )
+    parser.add_argument(
+        "--joint-log",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="also write the episode as a joint log (.csv or .npz)",
+    )
     parser.set_defaults(run=run)
 
 
@@ -44,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
         viewer=args.viewer,
         env_kwargs=robot_kwargs(args),
         task=args.task,
+        joint_log=args.joint_log is not None,
     )
     out = args.out or Path("runs") / time.strftime("rollout-%Y%m%d-%H%M%S")
     png, summary_json = save_rollout(result, out)  # made once the episode ran: an error leaves no folder
@@ -53,4 +61,8 @@ def run(args: argparse.Namespace) -> int:
         f"distance {summary['distance_m'] * 100:.1f} cm, return {summary['return']:.2f}"
     )
     print(f"saved {png} and {summary_json}")
+    if result.joint_log is not None:
+        from armreach_core.sim2real.joint_log import write_joint_log
+
+        print(f"saved {write_joint_log(result.joint_log, args.joint_log)}")
     return 0

@@ -51,6 +51,9 @@ def add_parser(sub: Any) -> None:
     parser.add_argument("--backend", default=DEFAULT_BACKEND, help="physics backend (default: %(default)s)")
     parser.add_argument("--her", action="store_true", help="hindsight experience replay (off-policy algorithms)")
     parser.add_argument(
+        "--physics", default=None, metavar="PROFILE", help="train on a fitted physics profile (armreach sysid)"
+    )
+    parser.add_argument(
         "--learner",
         choices=("sb3", "sbx"),
         default=None,
@@ -122,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
             device=args.device,
             threads=args.threads,
             placement={
-                **{key: getattr(args, key) for key in ("home", "base_position", "base_orientation")},
+                **{key: getattr(args, key) for key in ("home", "base_position", "base_orientation", "physics")},
                 **description_kwargs(args),
             },
             learner=args.learner,

@@ -14,6 +14,7 @@ from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
 from armreach_core.plugins.defaults import DEFAULT_TASK
 from armreach_core.robot.ik import RESTARTS, IKPolicy
+from armreach_core.sim2real.joint_log import JointLog
 
 #: Control steps between two frames of the episode.
 FRAME_EVERY = 25
@@ -27,6 +28,7 @@ class Rollout:
 
     summary: dict[str, Any]
     strip: np.ndarray[Any, Any]
+    joint_log: JointLog | None = None
 
 
 def rollout(
@@ -38,6 +40,7 @@ def rollout(
     viewer: bool = False,
     env_kwargs: Mapping[str, Any] | None = None,
     task: str = DEFAULT_TASK,
+    joint_log: bool = False,
 ) -> Rollout:
     """Run one episode from ``reset(seed=seed)`` with the IK reference (``policy="ik"``), the task's
     own reference controller (``policy="reference"``) or random actions.
@@ -52,6 +55,7 @@ def rollout(
         viewer: also show the episode in a live window, in real time.
         env_kwargs: the arm's env arguments (``urdf``, ``home``, ...).
         task: the registered task.
+        joint_log: also keep a :class:`~armreach_core.sim2real.joint_log.JointLog` of the episode.
     """
     env = ArmEnv(
         task,
@@ -70,13 +74,20 @@ def rollout(
         touches = 0
         frames = [env.backend.render(env.camera)]
         steps, total = 0, 0.0
+        rows: list[tuple[np.ndarray[Any, Any], np.ndarray[Any, Any], np.ndarray[Any, Any]]] = []
         while True:
+            q, qd = env.backend.joint_state()
             if reference is not None:
                 action = reference.act(obs)
             elif policy == "ik":
-                action = ik.act(env.backend.joint_state()[0], env.task.target)  # type: ignore[attr-defined]
+                action = ik.act(q, env.task.target)  # type: ignore[attr-defined]
             else:
                 action = env.action_space.sample()
+            if joint_log:  # the target the env sends for this action (its rule: the task's, clipped to the limits)
+                target = env.task.joint_targets(
+                    np.clip(np.asarray(action, dtype=np.float64), -1, 1), q, env.max_joint_step
+                )
+                rows.append((q, qd, env.robot.clip(target)))
             obs, reward, terminated, truncated, info = env.step(action)
             touches += int(info.get("collision", False))
             steps += 1
@@ -100,7 +111,18 @@ def rollout(
     }
     if "collision" in info:  # a task with obstacles
         summary["collision_steps"] = touches
-    return Rollout(summary=summary, strip=np.concatenate([f for f in picks if f is not None], axis=1))
+    log = None
+    if joint_log:
+        q_rows, qd_rows, targets = (np.array(column) for column in zip(*rows, strict=True))
+        meta = {
+            "arm": env.robot.name,
+            "backend": backend,
+            "control_dt": repr(env.physics.control_dt),
+            "kind": "rollout",
+        }
+        times = np.arange(len(rows), dtype=np.float64) * env.physics.control_dt
+        log = JointLog(env.robot.joint_names, times, targets, q_rows, qd_rows, metadata=meta)
+    return Rollout(summary=summary, strip=np.concatenate([f for f in picks if f is not None], axis=1), joint_log=log)
 
 
 def save_rollout(result: Rollout, out: Path) -> list[Path]:

@@ -264,7 +264,7 @@ def resolve_config(
     if placement:
         env = dict(settings.get("env", {}))
         env.update(
-            {key: dict(value) if isinstance(value, Mapping) else value if isinstance(value, bool) else list(value)
+            {key: dict(value) if isinstance(value, Mapping) else value if isinstance(value, (bool, str)) else list(value)
              for key, value in placement.items() if value is not None}
         )  # fmt: skip
         settings["env"] = validate_settings(algo, {"env": env}, "arm flags")["env"]

@@ -115,6 +115,18 @@ def _randomize(key: str, value: Any) -> dict[str, Any]:
     return dict(value)
 
 
+def _physics(key: str, value: Any) -> str:
+    """A physics profile's path (armreach_core.sim2real.profile), made absolute: runs are replayed from elsewhere."""
+    from pathlib import Path
+
+    from armreach_core.sim2real.profile import load_profile
+
+    if not isinstance(value, str):
+        raise ConfigError(f"{key}: expected the path of a physics profile (YAML), got {value!r}")
+    load_profile(value)
+    return str(Path(value).resolve())
+
+
 ENV_SCHEMA: dict[str, Check] = {
     "max_episode_steps": _num(int, 1),
     "max_joint_step": _num(float, 0.0, 1.0, lo_open=True),
@@ -133,6 +145,8 @@ ENV_SCHEMA: dict[str, Check] = {
     "allow_xacro_env": _bool,
     # a perturbation drawn per training episode (domain randomization)
     "randomize": _randomize,
+    # a fitted physics profile (armreach sysid): the dynamics and latency trained on
+    "physics": _physics,
 }
 
 

@@ -78,8 +78,9 @@ def sweep(
     grids: Mapping[str, Sequence[float]] = GRIDS,
     trust: bool = False,
     progress: Callable[[Cell], None] | None = None,
+    physics: str | None = None,
 ) -> list[Cell]:
-    """Evaluate the run in every cell of ``grids``."""
+    """Evaluate the run in every cell of ``grids`` (around the physics profile ``physics`` when given)."""
     if max_episode_steps < 1:
         raise ConfigError(f"max_episode_steps must be positive, got {max_episode_steps}")
     config = dataclasses.replace(runs.read_config(run_dir), eval_max_episode_steps=max_episode_steps)
@@ -89,6 +90,8 @@ def sweep(
         configure_threads(config.torch_threads, "cpu")
     agent = load_agent(run_dir, config, backend, trust=trust)
     kwargs = env_kwargs(config, backend=backend, evaluation=True)
+    if physics is not None:
+        kwargs["physics"] = physics
     cells = []
     for key, grid in grids.items():
         for magnitude in grid:

@@ -1,0 +1,71 @@
+"""``armreach export`` and the policy runtime: the exported policy acts as the trained model does."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from armreach_core.cli import main
+from armreach_core.env import ArmEnv
+from armreach_core.errors import ConfigError
+from armreach_core.sim2real.runtime import ENGINES, PolicyRuntime
+from tests.conftest import TrainedRun
+
+pytestmark = pytest.mark.training
+pytest.importorskip("onnx")
+
+
+@pytest.mark.parametrize(
+    "flags",
+    [
+        ("--algo", "ppo", "--seed", "3"),  # SB3 (PyTorch), a flat observation, actions clipped
+        ("--algo", "td3", "--seed", "3"),  # SBX (JAX), tanh-squashed
+        ("--algo", "sac", "--her", "--learner", "sb3", "--seed", "3"),  # SB3 SAC on a Dict observation
+    ],
+)
+def test_the_exported_policy_acts_as_the_trained_model(
+    tmp_path: Path, trained_run: Callable[..., TrainedRun], flags: tuple[str, ...]
+) -> None:
+    from armreach_core.rl import runs
+    from armreach_core.rl.agents import env_kwargs
+    from armreach_core.rl.evaluate import load_agent
+
+    run = trained_run(*flags)
+    out = tmp_path / "export"
+    assert main(["export", str(run.path), "--out", str(out)]) == 0
+    card = json.loads((out / "card.json").read_text())
+    config = runs.read_config(run.path)
+    agent = load_agent(run.path, config)
+    env = ArmEnv(**env_kwargs(config))
+    engines = [e for e in ENGINES if e != "onnxruntime" or _has("onnxruntime")]
+    runtimes = [PolicyRuntime(out, engine=e) for e in engines]
+    try:
+        assert card["format"] == "armreach-policy-card"
+        assert [j["name"] for j in card["joints"]] == list(env.robot.joint_names)
+        assert card["control_dt"] == pytest.approx(env.physics.control_dt)
+        assert card["action"]["max_joint_step"] == env.max_joint_step
+        obs, _ = env.reset(seed=5)
+        for _ in range(40):
+            action = agent.act(obs, env)
+            for runtime in runtimes:
+                np.testing.assert_allclose(runtime.act(obs), action, atol=1e-5, rtol=0)
+            obs, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                obs, _ = env.reset()
+    finally:
+        env.close()
+
+
+def _has(module: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(module) is not None
+
+
+def test_the_runtime_refuses_a_folder_without_a_card_or_a_wrong_observation(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="no card.json"):
+        PolicyRuntime(tmp_path)
