@@ -233,6 +233,15 @@ def default_algo(preset: str, task: str = DEFAULT_TASK) -> str:
     return algos[0] if len(algos) == 1 else ("ddpg" if "ddpg" in algos else algos[0])
 
 
+def _env_value(value: Any) -> Any:
+    """An arm flag's value as the env section holds it: mappings and sequences as plain ones."""
+    if isinstance(value, Mapping):
+        return dict(value)
+    if isinstance(value, (bool, str)):
+        return value
+    return list(value)
+
+
 def resolve_config(
     *,
     algo: str,
@@ -263,10 +272,7 @@ def resolve_config(
     settings = loaded.get(task, algo)
     if placement:
         env = dict(settings.get("env", {}))
-        env.update(
-            {key: dict(value) if isinstance(value, Mapping) else value if isinstance(value, (bool, str)) else list(value)
-             for key, value in placement.items() if value is not None}
-        )  # fmt: skip
+        env.update({key: _env_value(value) for key, value in placement.items() if value is not None})
         settings["env"] = validate_settings(algo, {"env": env}, "arm flags")["env"]
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ConfigError(f"--seed must be a non-negative integer, got {seed!r}")
