@@ -137,7 +137,7 @@ def test_shadow_mode_sends_nothing_and_finds_where_the_twin_parts_from_a_held_ar
     env = twin_env(policy.card, "pybullet")
     try:
         driver = ScriptedDriver(env.robot, 1e-3)  # an arm held still by its own controller: the twin moves off
-        result = shadow(policy, driver, env, steps=40, seed=3)
+        result = shadow(policy, driver, env, steps=80, seed=3)
     finally:
         env.close()
     assert driver.sent == []

@@ -145,7 +145,7 @@ def test_driving_into_an_obstacle_touches_it_on_the_same_link_on_every_engine() 
     if len(touches) == 2:
         (s0, k0, links0, obs0), (s1, k1, links1, obs1) = touches.values()
         assert s0 == s1 and abs(k0 - k1) <= 2
-        assert links0 & links1 and obs0 == obs1
+        assert links0 & links1 and set(obs0) & set(obs1)  # the same link touches the same obstacle
 
 
 def test_the_observation_holds_the_obstacles_and_the_reward_reads_the_collision(env: Any) -> None:
