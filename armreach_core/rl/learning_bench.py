@@ -168,7 +168,7 @@ def to_markdown(rows: Sequence[dict[str, object]]) -> str:
         rest = value["setup"] + value["start"]
         return " / ".join([*shown, f"start {100 * rest:.0f}"]) + " %"
 
-    header = ["backend", "algorithm", "reached", "wall-clock to 95 % (s)", "env steps", "final success", "time"]
+    header = ["backend", "algorithm", "stopped early", "command wall-clock (s)", "env steps", "final success", "time"]
     body = [
         [
             str(row["backend"]),
