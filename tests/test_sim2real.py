@@ -205,7 +205,8 @@ def test_an_env_runs_a_profiles_dynamics_and_latency(tmp_path: Path) -> None:
             moved.append(plain.backend.joint_state()[0])
             held.append(late.backend.joint_state()[0])
         assert np.abs(moved[1] - moved[0]).max() > 0.01
-        np.testing.assert_allclose(held[2], held[0], atol=1e-6)  # two steps of latency: nothing arrived yet
+        # two steps of latency: nothing arrived yet, the arm holds (to PyBullet's holding bound, 4e-5 rad)
+        np.testing.assert_allclose(held[2], held[0], atol=5e-5)
         assert np.abs(held[3] - held[0]).max() > 0.01
         assert q0 is not None
     finally:
@@ -221,7 +222,9 @@ def test_an_env_refuses_a_profile_it_cannot_run(tmp_path: Path) -> None:
         ArmEnv(backend=BACKENDS[0], physics=path)
 
 
+@pytest.mark.training
 def test_a_run_config_carries_a_profile_to_its_envs_and_refuses_a_missing_one(tmp_path: Path) -> None:
+    pytest.importorskip("stable_baselines3")
     from armreach_core.env import ArmEnv
     from armreach_core.rl.agents import env_kwargs
     from armreach_core.rl.config import resolve_config

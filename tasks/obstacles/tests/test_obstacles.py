@@ -185,7 +185,9 @@ def test_a_short_training_run_with_planner_demonstrations(tmp_path: Path) -> Non
     assert (out / "model.zip").is_file()
 
 
+@pytest.mark.training
 def test_evaluation_counts_collisions_and_clearance_for_the_planner() -> None:
+    pytest.importorskip("stable_baselines3")
     from armreach_obstacles.baseline import evaluate_planner
 
     summary = evaluate_planner(BACKENDS[0], episodes=3).summary()
