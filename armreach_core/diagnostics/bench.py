@@ -25,6 +25,7 @@ from armreach_core.diagnostics.tables import markdown_table
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ArmReachError
 from armreach_core.plugins.lookup import load_backend_class, load_backend_probes
+from armreach_core.robot.model import FloatArray
 
 #: Targets the numbers are held to.
 TARGETS = {"step_over_bare": 1.25, "step_over_engine": 1.25, "reset_ms": 1.0, "create_ms": 50.0}
@@ -76,21 +77,13 @@ def bench_bare(env: ArmEnv, steps: int, repeats: int) -> float:
     bare_loop = load_backend_probes(env.backend_name).bare_loop
     if bare_loop is None:
         raise NotImplementedError(f"backend {env.backend_name!r} offers no bare loop for benchmarks")
-    backend = env.backend
-    deltas = _deltas(steps, env.robot.dof, env.max_joint_step)
-    episodes = [deltas[i : i + env.max_episode_steps] for i in range(0, steps, env.max_episode_steps)]
 
-    def run() -> float:
-        total = 0.0
-        env.reset(seed=0)
-        for episode in episodes:
-            t0 = time.perf_counter()
-            bare_loop(backend, episode)
-            total += time.perf_counter() - t0
-            env.reset()
-        return total
+    def timed(backend: Any, episode: Any) -> float:
+        t0 = time.perf_counter()
+        bare_loop(backend, episode)
+        return time.perf_counter() - t0
 
-    return steps / _best(repeats, run)
+    return _episodes_per_second(env, steps, repeats, timed)
 
 
 def bench_engine(env: ArmEnv, steps: int, repeats: int) -> float:
@@ -98,6 +91,13 @@ def bench_engine(env: ArmEnv, steps: int, repeats: int) -> float:
     engine_seconds = load_backend_probes(env.backend_name).engine_seconds
     if engine_seconds is None:
         raise NotImplementedError(f"backend {env.backend_name!r} offers no engine timing for benchmarks")
+    return _episodes_per_second(env, steps, repeats, engine_seconds)
+
+
+def _episodes_per_second(
+    env: ArmEnv, steps: int, repeats: int, seconds_of: Callable[[Any, FloatArray], float]
+) -> float:
+    """Steps/s of ``seconds_of(backend, episode_deltas)`` over the bare loop's episodes (resets untimed)."""
     backend = env.backend
     deltas = _deltas(steps, env.robot.dof, env.max_joint_step)
     episodes = [deltas[i : i + env.max_episode_steps] for i in range(0, steps, env.max_episode_steps)]
@@ -106,7 +106,7 @@ def bench_engine(env: ArmEnv, steps: int, repeats: int) -> float:
         total = 0.0
         env.reset(seed=0)
         for episode in episodes:
-            total += engine_seconds(backend, episode)
+            total += seconds_of(backend, episode)
             env.reset()
         return total
 
