@@ -28,7 +28,7 @@ from armreach_core.rl.monitor import episode_rewards, load_monitors
 from armreach_core.rl.monitor import training_progress as training_progress  # where it was first defined
 from armreach_core.rl.stats import Interval, iqm_interval
 from armreach_core.rl.train import train
-from armreach_core.rl.validation import read_validations
+from armreach_core.rl.validation import stopped_early
 
 #: The paper's numbers (Tables 2-4): PPO and DDPG, 614,400 steps, 100 evaluation episodes.
 PAPER = {
@@ -213,7 +213,7 @@ def run_experiment(
             result.jerk_traces.append(evaluation.jerk_trace)
             result.control_dt = evaluation.control_dt
             result.timesteps.append(int(read_progress(run_dir).get("timesteps") or runs.read_config(run_dir).timesteps))
-            result.stopped.append(bool((rows := read_validations(run_dir)) and rows[-1]["passed"] == 1))
+            result.stopped.append(stopped_early(run_dir))
         results.append(result)
     ik_dir = runs.new_run_dir(out / "ik")  # nothing to train: always written afresh
     ik_config = resolve_config(

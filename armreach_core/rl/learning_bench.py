@@ -30,7 +30,7 @@ from armreach_core.diagnostics.tables import markdown_table
 from armreach_core.errors import ConfigError
 from armreach_core.rl.stats import iqm_interval
 from armreach_core.rl.timing import PARTS, read_timing
-from armreach_core.rl.validation import read_validations
+from armreach_core.rl.validation import stopped_early
 
 #: Episodes of the final evaluation of each run.
 FINAL_EPISODES = 100
@@ -82,7 +82,6 @@ def run_one(preset: str, algo: str, backend: str, seed: int, out: Path) -> Learn
     seconds = time.perf_counter() - t0
     if done.returncode != 0:
         raise ConfigError(f"`armreach train` failed for {algo} on {backend}, seed {seed}: {done.stderr.strip()[-500:]}")
-    rows = read_validations(out)
     timing = read_timing(out)
     parts = {part: timing.get(part, 0.0) for part in PARTS}
     parts["start"] = max(seconds - timing.get("total", seconds), 0.0)
@@ -94,7 +93,7 @@ def run_one(preset: str, algo: str, backend: str, seed: int, out: Path) -> Learn
         seed,
         seconds,
         int(timing.get("timesteps", 0)),
-        bool(rows and rows[-1]["passed"] == 1),
+        stopped_early(out),
         float(final),
         parts,
     )

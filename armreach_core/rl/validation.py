@@ -221,3 +221,9 @@ def read_validations(run_dir: Path) -> list[dict[str, float]]:
         return []
     with open(path, newline="", encoding="utf-8") as handle:
         return [{key: float(value) for key, value in row.items()} for row in csv.DictReader(handle)]
+
+
+def stopped_early(run_dir: Path) -> bool:
+    """Whether the run's training stopped at a passed held-out evaluation (its last one)."""
+    rows = read_validations(run_dir)
+    return bool(rows) and rows[-1]["passed"] == 1
