@@ -239,8 +239,7 @@ FK_BOUNDS_M = {"pybullet": 2.5e-7, "mujoco": 2e-15}
 #: Pandas' open-loop gaps are 1-4 mm where the other arms' are under 1 mm; Franka's IK reach
 #: with seed 1 aims beyond the arm's joint limits, the IK loop (which does not know them)
 #: swings joint 1 across +-1.5 rad with joints 2, 4 and 6 on their limits, and the engines part
-#: by 19.3 mm (docs/parity.md); KR210's with seed 1 likewise (A2 on its limit from step 100, A3 and
-#: A5 then driven at full speed into a near-singular pose: 6.75 mm). The contact phases of the
+#: by 19.3 mm (docs/parity.md). The contact phases of the
 #: heavy industrial arms (KR16, KR210, IRB140) part by 22-291 mm: docs/parity.md ("Heavy arms").
 MEASURED: dict[tuple[str, str], Measured] = {
     ("ar6", "random"): Measured(0.0664, 0.329, 6.87, 0.185, (137, None)),
@@ -309,11 +308,11 @@ MEASURED: dict[tuple[str, str], Measured] = {
     ("kuka-kr16", "press"): Measured(0.0198, 0.022, 2.3, None, (22, 22)),
     ("kuka-kr210", "random"): Measured(1.21, 3.05, 291.0, 58.0, (51, 127)),
     ("kuka-kr210", "biased"): Measured(0.00776, 0.00603, 244.0, 49.2, (22, 51)),
-    ("kuka-kr210", "scripted"): Measured(6.75, 6.29, None, 8.15, (None, None)),
+    ("kuka-kr210", "scripted"): Measured(0.0137, 0.138, None, 0.963, (None, None)),
     ("kuka-kr210", "press"): Measured(0.0453, 0.0832, 1.59, None, (181, 181)),
     ("abb-irb140", "random"): Measured(1.12, 0.453, 78.9, 0.774, (44, 86)),
     ("abb-irb140", "biased"): Measured(0.0333, 0.0118, 121.0, 1.61, (19, 29)),
-    ("abb-irb140", "scripted"): Measured(0.00754, 0.0386, None, 1.72, (None, None)),
+    ("abb-irb140", "scripted"): Measured(0.0105, 0.0368, None, 4.47, (None, None)),
     ("abb-irb140", "press"): Measured(0.00833, 0.0158, 0.881, None, (83, 83)),
     ("vega-1u-left", "random"): Measured(2.15, 3.56, None, 0.0399, (None, None)),
     ("vega-1u-left", "biased"): Measured(4.03, 8.2, None, 0.0344, (None, None)),

@@ -139,9 +139,10 @@ IK_SEEDS = range(30_000, 30_100)
 
 
 #: Corpus arms on which the IK reference misses more than 1 % of these targets, not run here: each
-#: takes many minutes of failed 400-step episodes. KR210: 0 of 3 targets in `armreach robot` (its
-#: motors cannot hold it); IRB140 and Vega's left arm: more than 1 of 100 missed.
-IK_SHORT = {"kuka-kr210", "abb-irb140", "vega-1u-left"}
+#: takes many minutes of failed 400-step episodes. IRB140 and Vega's left arm: more than 1 of 100
+#: missed (Vega 77, most 0.2-0.4 m away). KR210 reaches every one since its motors hold it and
+#: its reachability map is dense enough to draw targets from (it drew from 8 voxels before).
+IK_SHORT = {"abb-irb140", "vega-1u-left"}
 
 
 def _ik_param(arm: Any) -> Any:
