@@ -398,7 +398,9 @@ def test_local_sweep_runs_every_trial_into_a_run_folder_and_one_report(tmp_path:
     assert (out / "curves.png").stat().st_size > 1000
     for trial in spec.trials():  # normal run folders: `armreach evaluate` works on each
         run_dir = out / "runs" / trial.id
-        assert json.loads((run_dir / TRIAL_RECORD).read_text())["action"] == "training"
+        record = json.loads((run_dir / TRIAL_RECORD).read_text())
+        assert record["action"] == "training"
+        assert record["nice"] == os.nice(0), "trials run at the sweep's own priority, not Ray's nice 15"
         assert len(evaluate_run(run_dir, episodes=1).episodes) == 1
     # --report-only: the same report again from the run folders, nothing trained
     models = {p: p.stat().st_mtime_ns for p in (out / "runs").glob("*/model.zip")}
