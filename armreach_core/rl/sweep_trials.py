@@ -149,6 +149,7 @@ def run_trial(trial: Trial, out: Path, callbacks: Sequence[Any] = ()) -> dict[st
 def trial_row(trial: Trial, run_dir: Path, summary: Mapping[str, Any]) -> dict[str, Any]:
     """The facts of a finished trial that the sweep's tables hold."""
     from armreach_core.rl.sweep_report import time_to_success
+    from armreach_core.rl.timing import read_timing
 
     steps95, seconds95 = time_to_success(run_dir)
     record = run_dir / TRIAL_RECORD
@@ -170,6 +171,8 @@ def trial_row(trial: Trial, run_dir: Path, summary: Mapping[str, Any]) -> dict[s
         "ended_by": dict(summary.get("ended_by", {})),
         "steps_to_95": steps95,
         "minutes_to_95": seconds95 / 60 if seconds95 == seconds95 else seconds95,
+        "nice": where.get("nice"),
+        "timing": read_timing(run_dir),
     }
 
 
