@@ -232,16 +232,8 @@ def test_held_joints_are_reset_and_held(arm: CorpusArm, backend: str) -> None:
 
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("arm", _arms())
-def test_observation_is_one_consistent_snapshot(arm: CorpusArm, backend: str, request: Any) -> None:
+def test_observation_is_one_consistent_snapshot(arm: CorpusArm, backend: str) -> None:
     """The observed end effector is the URDF's forward kinematics of the observed joint angles."""
-    if (arm.name, backend) == ("kuka-kr210", "pybullet"):
-        request.applymarker(
-            pytest.mark.xfail(
-                strict=True,
-                reason="KR210's URDF motors hold it in under 5 % of its poses: on PyBullet its elbow sags past "
-                "its joint limit, where the forward kinematics (which clips to the limits) no longer matches",
-            )
-        )
     env = gym.make("armreach/Reach-v1", **_kwargs(arm), backend=backend)
     try:
         task, robot = env.unwrapped.task, env.unwrapped.robot

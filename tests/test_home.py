@@ -30,7 +30,6 @@ def _load(arm):
 
 #: Corpus arms whose published description has no home that passes, and why (measured).
 NO_GOOD_HOME = {
-    "kuka-kr210": "its URDF effort limits hold it in under 5 % of its poses, its zero pose not among them",
     "vega-1u-left": "its head's collision box overlaps its torso's at the zero pose and the search finds no other home",
 }
 #: Corpus arms added with the xacro and glTF descriptions: their checks take 5-20 s each.

@@ -39,7 +39,7 @@ def markdown(report: RobotReport) -> str:
                         joint["type"],
                         f"{joint['lower']:.3f}",
                         f"{joint['upper']:.3f}",
-                        f"{joint['effort']:g}",
+                        f"{joint['effort']:.4g}" + ("" if joint.get("effort_given", True) else " (sized)"),
                         f"{joint['velocity']:g}",
                         f"{home:.3f}",
                     ]

@@ -94,7 +94,15 @@ def _robot_facts(report: RobotReport, env: ArmEnv) -> None:
     report.name = robot.name
     report.ee_link = robot.ee_link
     report.joints = [
-        {"name": j.name, "type": j.type, "lower": j.lower, "upper": j.upper, "effort": j.effort, "velocity": j.velocity}
+        {
+            "name": j.name,
+            "type": j.type,
+            "lower": j.lower,
+            "upper": j.upper,
+            "effort": j.effort,
+            "effort_given": j.effort_given,
+            "velocity": j.velocity,
+        }
         for j in robot.joints
     ]
     report.held_joints = [joint.name for joint in robot.held_joints]

@@ -41,6 +41,9 @@ class JointSpec:
     velocity: float
     effort: float
     damping: float
+    #: False when the URDF gives no effort limit (none, or 0 as ROS-Industrial descriptions write
+    #: an unknown one): ``effort`` is then armreach's (:func:`armreach_core.robot.statics.sized_efforts`).
+    effort_given: bool = True
 
 
 @dataclass(frozen=True)
@@ -120,6 +123,7 @@ def joint_spec(joint: Any) -> JointSpec:
         velocity=abs(velocity) or DEFAULT_VELOCITY_LIMIT,
         effort=abs(effort) or DEFAULT_EFFORT_LIMIT,
         damping=finite(damping, f"damping of joint {name!r}"),
+        effort_given=effort != 0.0,
     )
 
 

@@ -17,15 +17,20 @@ them follow their master.
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Mapping
 
 import numpy.typing as npt
 
 from armreach_core.robot.home import place
+from armreach_core.robot.joints import DEFAULT_EFFORT_LIMIT
 from armreach_core.robot.kinematics import MOVABLE_TYPES, ArmKinematics, FloatArray, HeldJoint, JointSpec, Mimic
 from armreach_core.robot.placement import base_pose
-from armreach_core.robot.urdf import read_urdf
+from armreach_core.robot.statics import HOLD_MARGIN, sized_efforts
+from armreach_core.robot.urdf import ParsedURDF, read_urdf
+
+log = logging.getLogger("armreach.robot")
 
 __all__ = ["MOVABLE_TYPES", "FloatArray", "HeldJoint", "JointSpec", "Mimic", "RobotModel"]
 
@@ -93,3 +98,24 @@ class RobotModel(ArmKinematics):
         #: The home pose (rad or m per joint, read-only).
         self.home: FloatArray = q
         self._sealed = True
+
+    def _build(
+        self,
+        parsed: ParsedURDF,
+        ee_link: str | None,
+        tool_joints: tuple[str, ...],
+        position: tuple[float, float, float],
+        orientation: tuple[float, float, float, float],
+    ) -> None:
+        super()._build(parsed, ee_link, tool_joints, position, orientation)
+        # joints whose URDF gives no effort limit get one sized for the arm, before the home is chosen
+        self.joints = sized_efforts(self)
+        sized = [j for j in self.joints[: self.arm_dof] if not j.effort_given]
+        if sized:
+            note = (
+                f"effort limits the URDF does not give, sized to hold what each joint carries in its heaviest "
+                f"pose at {HOLD_MARGIN:.0%} (at least {DEFAULT_EFFORT_LIMIT:g}): "
+                + ", ".join(f"{j.name} {j.effort:,.0f} {'N' if j.type == 'prismatic' else 'N·m'}" for j in sized)
+            )
+            self.anatomy = (*self.anatomy, note)
+            log.info("%s", note)

@@ -10,6 +10,7 @@ arm) is otherwise asked to reach targets it can touch only on paper.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -17,12 +18,15 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.robot.joints import DEFAULT_EFFORT_LIMIT, JointSpec
 from armreach_core.robot.kinematics import ArmKinematics, FloatArray
 
 #: Standard gravity in the world frame (m/s²), as both engines use it.
 GRAVITY = np.array([0.0, 0.0, -9.81])
 #: The share of a joint's effort limit that holding a pose may use.
 HOLD_MARGIN = 0.8
+#: Seeded poses over which a joint without an effort limit is sized (:func:`sized_efforts`).
+SIZING_POSES = 2048
 
 
 @dataclass(frozen=True)
@@ -69,6 +73,50 @@ def gravity_torques(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:
             total = total + np.sum(axis * lever, axis=-1)
         torques.append(-total)  # the joint opposes gravity's moment
     return np.stack(torques, axis=-1)
+
+
+def carried_torques(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:
+    """The largest torque (N·m; N for prismatic joints) gravity can put on each arm joint at ``q``,
+    whatever way the arm is mounted, shape (..., arm_dof): ``|g| |axis x S|`` with ``S`` the first
+    moment of the mass the joint carries about its axis (a prismatic joint: ``|g|`` times that mass).
+    For a joint whose axis is horizontal it is :func:`gravity_torques`'s largest over a turn of the base.
+    """
+    model = mass_model(robot)
+    frames, children = robot.chain_frames(q)
+    centers = [child[..., :3, :3] @ model.centers[k] + child[..., :3, 3] for k, child in enumerate(children)]
+    g = float(np.linalg.norm(GRAVITY))
+    torques = []
+    for j, (origin, axis, kind) in enumerate(frames):
+        if kind == "prismatic":
+            torques.append(np.full(np.shape(origin)[:-1], g * float(model.masses[j:].sum())))
+            continue
+        moment = sum((model.masses[k] * (centers[k] - origin) for k in range(j, len(children))), np.zeros(3))
+        torques.append(g * np.linalg.norm(np.cross(axis, moment), axis=-1))
+    return np.stack(torques, axis=-1)
+
+
+def sized_efforts(robot: ArmKinematics) -> tuple[JointSpec, ...]:
+    """``robot.joints`` with an effort limit for every arm joint whose URDF gives none.
+
+    Such a joint (``effort_given`` False: ROS-Industrial descriptions write ``effort="0"``) gets
+    what holding its load takes in the arm's heaviest pose (the largest :func:`carried_torques`
+    over :data:`SIZING_POSES` seeded poses) over :data:`HOLD_MARGIN`, so that the holdability
+    rules treat it as any arm whose motors are sized for it; at least
+    :data:`~armreach_core.robot.joints.DEFAULT_EFFORT_LIMIT`. A single default cannot fit every arm:
+    100 N·m would hold a KUKA KR210's shoulder in none of its poses. A vertical base joint is
+    sized as if its axis were horizontal: the motor that moves the same load. Tool joints keep
+    the default.
+    """
+    if all(joint.effort_given for joint in robot.joints[: robot.arm_dof]):
+        return robot.joints
+    poses = robot.sample_configurations(np.random.default_rng(0), SIZING_POSES)
+    needed = carried_torques(robot, poses).max(axis=0) / HOLD_MARGIN
+    return tuple(
+        joint
+        if joint.effort_given or i >= robot.arm_dof
+        else dataclasses.replace(joint, effort=max(DEFAULT_EFFORT_LIMIT, float(needed[i])))
+        for i, joint in enumerate(robot.joints)
+    )
 
 
 def effort_ratio(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:

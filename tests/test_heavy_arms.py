@@ -1,0 +1,105 @@
+"""Heavy industrial arms: motors sized where the URDF gives no effort limit, and no drag PyBullet adds.
+
+ROS-Industrial descriptions (the KUKA KR16 and KR210, the ABB IRB140 of ``rtb-data``) write
+``effort="0"``: no limit known. Such a joint's motor is sized to hold what it carries in the
+arm's heaviest pose (:func:`armreach_core.robot.statics.sized_efforts`); a single default of
+100 N·m held the KR210 in none of its poses, and the two engines' force-bounded motors then
+parted by 36-59 mm in free space. PyBullet drags every link of a multibody by default (0.04),
+which MuJoCo does not: while a motor is at its effort that drag shows (the KR16's biased run
+parted by 13 mm). docs/parity.md ("Heavy arms") has the measurements.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from armreach_core.diagnostics.corpus import corpus_arm
+from armreach_core.env import ArmEnv
+from armreach_core.robot.bundled import asset_path
+from armreach_core.robot.factory import build_robot
+from armreach_core.robot.joints import DEFAULT_EFFORT_LIMIT
+from armreach_core.robot.model import RobotModel
+from armreach_core.robot.statics import HOLD_MARGIN, carried_torques, effort_ratio, gravity_torques, holdable
+from tests.conftest import BACKENDS
+
+PAIR = ("pybullet", "mujoco")
+needs_both = pytest.mark.skipif(not set(PAIR) <= set(BACKENDS), reason="needs the PyBullet and MuJoCo backends")
+
+
+def _robot(name: str) -> RobotModel:
+    arm = corpus_arm(name)
+    if arm.path is None:
+        pytest.skip(f"{name} is not installed: {arm.install}")
+    return build_robot(arm.spec())
+
+
+@needs_both
+def test_an_arm_whose_motors_give_way_falls_the_same_on_both_engines() -> None:
+    """ar6 with every motor at 1 µN·m falls from home for six control steps (0.25 s, no contact):
+    the engines agree to 4e-11 rad (measured); with PyBullet's default link drag they parted by 3.6 mrad."""
+    runs = {}
+    for backend in PAIR:
+        env = ArmEnv("reach", backend=backend)
+        try:
+            env.reset(seed=0)
+            for joint in env.robot.joint_names:
+                env.backend.set_effort_limit(joint, 1e-6)
+            angles = []
+            for _ in range(6):
+                env.backend.set_joint_targets(env.robot.home)
+                env.backend.step()
+                angles.append(env.backend.joint_state()[0].copy())
+            assert env.backend.links_in_contact() == ()
+            runs[backend] = np.array(angles)
+        finally:
+            env.close()
+    assert np.abs(runs["pybullet"][-1] - runs["pybullet"][0]).max() > 0.3  # it falls: the elbow moves 0.6 rad
+    assert np.abs(runs["pybullet"] - runs["mujoco"]).max() < 1e-8
+
+
+def test_effort_limits_the_urdf_gives_are_kept() -> None:
+    robot = RobotModel(asset_path("ar6", "ar6.urdf"))
+    assert all(joint.effort_given for joint in robot.joints)
+    assert [joint.effort for joint in robot.joints] == [150.0, 150.0, 150.0, 28.0, 28.0, 28.0]
+
+
+def test_the_torque_a_joint_carries_bounds_the_torque_gravity_puts_on_it() -> None:
+    """carried_torques is gravity's largest moment over every mounting: never below gravity_torques;
+    over many poses of a joint whose axis stays horizontal (KR210's A2 to A5) the largest of the two
+    agree (measured within 1 %); a vertical axis (A1), which gravity never loads, carries as much as A2."""
+    robot = _robot("kuka-kr210")
+    poses = robot.sample_configurations(np.random.default_rng(3), 2000)
+    carried, gravity = carried_torques(robot, poses), np.abs(gravity_torques(robot, poses))
+    assert np.all(carried >= gravity - 1e-9 * np.maximum(1.0, carried))
+    np.testing.assert_allclose(gravity.max(axis=0)[1:5], carried.max(axis=0)[1:5], rtol=0.02)
+    assert gravity[:, 0].max() < 1e-6 and carried[:, 0].max() > carried[:, 1].max()
+
+
+@pytest.mark.parametrize("name", ["kuka-kr16", "kuka-kr210"])
+def test_joints_without_an_effort_limit_get_motors_that_hold_the_arm(name: str) -> None:
+    robot = _robot(name)
+    arm = robot.joints[: robot.arm_dof]
+    assert not any(joint.effort_given for joint in arm)  # effort="0" throughout
+    assert all(joint.effort >= DEFAULT_EFFORT_LIMIT for joint in arm)
+    poses = robot.sample_configurations(np.random.default_rng(11), 2000)  # not the sizing poses
+    assert holdable(robot, poses).mean() > 0.99
+    assert effort_ratio(robot, poses).max() < 1.0
+    assert any("effort limits the URDF does not give" in line for line in robot.anatomy)
+
+
+def test_kr210_motors_are_sized_from_its_masses() -> None:
+    """KR210 (3.3 t of moving links): A2 carries up to 20.6 kN·m, A3 4.6 kN·m (measured over 2,048 poses);
+    their motors get that over HOLD_MARGIN; its zero pose is holdable and is its home."""
+    robot = _robot("kuka-kr210")
+    efforts = np.array([joint.effort for joint in robot.joints])
+    assert efforts[1] == pytest.approx(20_550 / HOLD_MARGIN, rel=0.02)
+    assert efforts[2] == pytest.approx(4_625 / HOLD_MARGIN, rel=0.02)
+    assert np.all(efforts[3:] == DEFAULT_EFFORT_LIMIT)  # the wrist carries under 80 N·m
+    np.testing.assert_array_equal(robot.home, np.zeros(robot.dof))
+    assert effort_ratio(robot, robot.home).max() <= HOLD_MARGIN
+
+
+def test_an_arm_without_inertials_keeps_the_default_effort() -> None:
+    robot = _robot("abb-irb140")  # effort="0" and no <inertial>: nothing to size from
+    assert [joint.effort for joint in robot.joints] == [DEFAULT_EFFORT_LIMIT] * robot.dof
