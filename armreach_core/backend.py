@@ -44,6 +44,10 @@ class PhysicsConfig:
         visuals: load the URDF's visual meshes (default on); an env that never renders
             (``render_mode=None``) turns them off, and a backend may then skip them to save
             memory. Physics is the same either way.
+        engine_drag: keep the drag an engine puts on every moving link by default, which no
+            URDF states (PyBullet: ``linearDamping`` and ``angularDamping`` 0.04; MuJoCo
+            applies none). Default off; on gives the dynamics of the env ids before
+            ``Reach-v2`` (``Reach-v0``/``v1``, ``Grasp-v0``, ``ReachAround-v0``).
     """
 
     timestep: float = 1.0 / 240.0
@@ -53,6 +57,7 @@ class PhysicsConfig:
     inertia_from_file: bool = True
     ground: bool = True
     visuals: bool = True
+    engine_drag: bool = False
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.timestep) and 0.0 < self.timestep <= 0.1):

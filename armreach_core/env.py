@@ -74,7 +74,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         joint_limit_penalty: subtracted from the reward on each step whose target left the
             joint limits, default 0 (the paper's reward). Training shaping: a policy trained
             with clipping and a penalty also keeps within the limits under the paper's rule.
-        self_collision, inertia_from_file: see :class:`~armreach_core.backend.PhysicsConfig`.
+        self_collision, inertia_from_file, engine_drag: see
+            :class:`~armreach_core.backend.PhysicsConfig` (``engine_drag=True``: the dynamics
+            of older env ids).
         camera: a :class:`~armreach_core.backend.Camera` for rendering.
         tool_joints: joints off the arm's chain to actuate too (a gripper's fingers);
             default the registered robot's (none for a ``urdf``).
@@ -119,6 +121,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         joint_limit_penalty: float = 0.0,
         self_collision: bool = False,
         inertia_from_file: bool = True,
+        engine_drag: bool = False,
         camera: Camera | None = None,
         tool_joints: tuple[str, ...] | list[str] | None = None,
         allow_external_meshes: bool | None = None,
@@ -183,6 +186,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             self_collision=self_collision,
             inertia_from_file=inertia_from_file,
             visuals=render_mode is not None,
+            engine_drag=engine_drag,
         )
         self.camera = camera or Camera()
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.physics.control_dt)}

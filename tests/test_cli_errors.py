@@ -163,6 +163,13 @@ MATRIX = [
         r"--seeds must be >= 1, got 0",
         needs=("stable_baselines3",),
     ),
+    case(
+        "experiment",
+        "jobs-out-of-range",
+        ["experiment", "paper", "--jobs", "0"],
+        r"--jobs must be >= 1, got 0",
+        needs=("stable_baselines3",),
+    ),
     case("experiment", "missing-argument", ["experiment"], required("experiment", "name")),
     case(
         "experiment",

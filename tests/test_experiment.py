@@ -151,3 +151,27 @@ def test_an_experiment_folder_is_not_silently_reused_with_other_settings(tmp_pat
     preset.write_text(TINY.replace("batch_size: 16", "batch_size: 8"))
     with pytest.raises(ConfigError, match=r"holds a run with other settings \(batch_size: 16 here, 8 asked\)"):
         run_experiment(out, [Contender("DDPG", "ddpg", str(preset), steps=200)], episodes=1, eval_max_episode_steps=20)
+
+
+@pytest.mark.slow
+def test_runs_trained_side_by_side_give_the_runs_trained_one_after_another(tmp_path: Path) -> None:
+    preset = tmp_path / "tiny.yaml"
+    preset.write_text(TINY)
+    contenders = [Contender("PPO", "ppo", str(preset)), Contender("DDPG", "ddpg", str(preset))]
+    outcomes = {}
+    for jobs in (1, 2):
+        out = tmp_path / f"jobs{jobs}"
+        log = io.StringIO()
+        results, _ = run_experiment(
+            out, contenders, seeds=2, episodes=2, stream=log, eval_max_episode_steps=40, jobs=jobs
+        )
+        assert [r.seeds for r in results] == [[0, 1], [0, 1]]
+        assert log.getvalue().count("training") == 4
+        outcomes[jobs] = {
+            d.name: ((d / "eval-pybullet" / "episodes.csv").read_text(), _training_returns(d))
+            for d in sorted(out.iterdir())
+            if d.name != "ik"
+        }
+        assert [len(r.summaries) for r in results] == [2, 2]
+    assert outcomes[2] == outcomes[1]
+    assert len(outcomes[1]) == 4

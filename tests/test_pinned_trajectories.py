@@ -28,14 +28,16 @@ from tests.conftest import BACKENDS
 
 DATA = Path(__file__).parent / "data"
 PINNED = DATA / "pinned_trajectories.json"
+#: PyBullet's trajectories as pinned before the env ids of ``Reach-v2`` (its links dragged).
+ENGINE_DRAG_PINNED = DATA / "pinned_trajectories_engine_drag.json"
 LIMITS_PINNED = DATA / "pinned_limits_and_ground.json"
 SEEDS = (0, 1)
 STEPS = 200
 EVERY = 10
 
 
-def trajectory(backend: str, seed: int) -> dict[str, Any]:
-    env = ArmReach6DOFEnv(backend=backend)
+def trajectory(backend: str, seed: int, **options: Any) -> dict[str, Any]:
+    env = ArmReach6DOFEnv(backend=backend, **options)
     try:
         obs, _ = env.reset(seed=seed)
         actions = np.random.default_rng(seed).uniform(-1.0, 1.0, (STEPS, 6)).astype(np.float32)
@@ -133,6 +135,19 @@ def test_seeded_trajectories_stay_identical(backend: str, seed: int) -> None:
     np.testing.assert_array_equal(got["observations"], want["observations"])
     np.testing.assert_array_equal(got["rewards"], want["rewards"])
     assert got["distance"] == want["distance"]
+
+
+@pytest.mark.skipif("pybullet" not in BACKENDS, reason="PyBullet is not installed")
+@pytest.mark.parametrize("seed", SEEDS)
+def test_engine_drag_gives_the_dynamics_of_the_older_ids_bit_for_bit(seed: int) -> None:
+    """``engine_drag=True`` (``Reach-v1``) reproduces PyBullet's trajectories as they were pinned
+    before its links lost their drag; without it they differ."""
+    want = json.loads(ENGINE_DRAG_PINNED.read_text())[f"pybullet/{seed}"]
+    got = trajectory("pybullet", seed, engine_drag=True)
+    assert got["ends"] == want["ends"]
+    np.testing.assert_array_equal(got["observations"], want["observations"])
+    np.testing.assert_array_equal(got["rewards"], want["rewards"])
+    assert not np.array_equal(trajectory("pybullet", seed)["observations"], want["observations"])
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

@@ -148,7 +148,9 @@ def finished_sweep(tmp_path: Path) -> tuple[Path, Path]:
     # ppo s0: 30 successful episodes of 10 steps; 95 % counts from the 20th (steps 200, at 60 s)
     _trial_folder(out, "ppo-ar6-pybullet-s0", 0.9, [(10, 3.0 * (i + 1), True) for i in range(30)])
     _trial_folder(out, "ppo-ar6-pybullet-s1", 0.5, [(10, 1.0 * (i + 1), False) for i in range(30)])  # never
-    _trial_folder(out, "sac-ar6-pybullet-s0", 1.0, [(5, 1.0 * (i + 1), True) for i in range(40)])  # steps 100
+    sac = _trial_folder(out, "sac-ar6-pybullet-s0", 1.0, [(5, 1.0 * (i + 1), True) for i in range(40)])  # steps 100
+    timing = {"env": 30.0, "rollout_other": 6.0, "validation": 0.0, "learner": 60.0, "setup": 4.0, "total": 100.0}
+    (sac / "timing.json").write_text(json.dumps({**timing, "timesteps": 25000}))
     interrupted = out / "runs" / "sac-ar6-pybullet-s1"
     interrupted.mkdir(parents=True)
     (interrupted / "checkpoint.json").write_text(json.dumps({"timesteps": 256}))
@@ -195,6 +197,10 @@ def test_report_only_rebuilds_the_report_from_the_trial_folders_without_ray(
     assert [r["trial"] for r in json.loads((out / "trials.json").read_text())] == [
         "ppo-ar6-pybullet-s0", "ppo-ar6-pybullet-s1", "sac-ar6-pybullet-s0"]  # fmt: skip
     assert (out / "curves.png").stat().st_size > 1000
+    # Where the time went: only the trial that recorded its split; shares of its 100 s, 25,000 steps in them
+    time_split = report.split("## Where the time went", 1)[1]
+    assert "| sac-ar6-pybullet-s0 | 1.7 | 250 | 30 | 6 | 0 | 60 | 4 | – |" in time_split
+    assert "ppo-ar6-pybullet-s0" not in time_split
 
 
 @pytest.mark.parametrize(
@@ -398,7 +404,10 @@ def test_local_sweep_runs_every_trial_into_a_run_folder_and_one_report(tmp_path:
     assert (out / "curves.png").stat().st_size > 1000
     for trial in spec.trials():  # normal run folders: `armreach evaluate` works on each
         run_dir = out / "runs" / trial.id
-        assert json.loads((run_dir / TRIAL_RECORD).read_text())["action"] == "training"
+        record = json.loads((run_dir / TRIAL_RECORD).read_text())
+        assert record["action"] == "training"
+        assert record["nice"] == os.nice(0), "trials run at the sweep's own priority, not Ray's nice 15"
+        assert f"| {trial.id} |" in report.split("## Where the time went", 1)[1]
         assert len(evaluate_run(run_dir, episodes=1).episodes) == 1
     # --report-only: the same report again from the run folders, nothing trained
     models = {p: p.stat().st_mtime_ns for p in (out / "runs").glob("*/model.zip")}

@@ -574,7 +574,7 @@ sys.modules["stable_baselines3"] = None  # as if it were not installed
 import gymnasium as gym
 import armreach_core
 from armreach_core.errors import MissingExtraError
-env = gym.make("armreach/Reach-v1")
+env = gym.make("armreach/Reach-v2")
 env.reset(seed=0)
 env.step(env.action_space.sample())
 env.close()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 
 import gymnasium as gym
@@ -102,6 +103,23 @@ def test_ros_package_path_finds_a_package_by_the_name_its_manifest_declares(arm,
     monkeypatch.setenv(ROS_PACKAGE_PATH, str(tools.parent))
     assert ros_package_path()["tools_support"] == tools.resolve()
     assert build_robot(ArmSpec.create(top)).joint_names
+
+
+def test_a_changed_ros_package_path_is_read_again(arm, tmp_path, monkeypatch):
+    top, tools = arm
+    monkeypatch.setenv(ROS_PACKAGE_PATH, str(tools.parent))
+    first = build_robot(ArmSpec.create(top))
+    other = tmp_path / "elsewhere" / "tools_copy"
+    shutil.copytree(tools, other)
+    monkeypatch.setenv(ROS_PACKAGE_PATH, str(other.parent))
+    second = build_robot(ArmSpec.create(top))
+    meshes = [
+        {m.get("filename") for m in etree.fromstring(r.parsed.resolved_xml).iter("mesh")} for r in (first, second)
+    ]
+    assert meshes == [{str((tools / "meshes" / "tip.obj").resolve())}, {str((other / "meshes" / "tip.obj").resolve())}]
+    monkeypatch.delenv(ROS_PACKAGE_PATH)
+    with pytest.raises(URDFError, match=r"no package 'tools_support' is known"):
+        build_robot(ArmSpec.create(top))
 
 
 def test_an_unknown_package_is_named_with_the_fix(arm):
@@ -222,7 +240,7 @@ def test_a_xacro_arm_steps_under_gym_make(arm, backend):
     if backend not in BACKENDS:
         pytest.skip(f"the {backend} backend is not installed")
     top, tools = arm
-    env = gym.make("armreach/Reach-v1", backend=backend, urdf=top, package_dirs={"tools_support": tools})
+    env = gym.make("armreach/Reach-v2", backend=backend, urdf=top, package_dirs={"tools_support": tools})
     try:
         env.reset(seed=0)
         for _ in range(3):

@@ -29,6 +29,13 @@ def add_parser(sub: Any) -> None:
     parser.add_argument("--episodes", type=int, default=100, help="evaluation episodes per run (default: 100)")
     parser.add_argument("--backend", default=DEFAULT_BACKEND, help="physics backend (default: %(default)s)")
     parser.add_argument("--fast", action="store_true", help="add the `fast` preset's agents (PPO and SAC)")
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="runs trained at once, each in a process of its own (default: 1; the number of cores is the most "
+        "that pays)",
+    )
     parser.add_argument("--out", type=Path, default=None, help="experiment folder (default: runs/experiment-...)")
     parser.set_defaults(run=run)
 
@@ -71,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
             backend=args.backend,
             stream=sys.stderr,
             command=args.command_line,
+            jobs=args.jobs,
         )
     except KeyboardInterrupt:
         print(

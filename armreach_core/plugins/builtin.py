@@ -22,8 +22,11 @@ def armreach_register_tasks(register: Register) -> None:
     register(
         TaskSpec(
             name=DEFAULT_TASK,
-            env_id="armreach/Reach-v1",
-            deprecated_ids={"armreach/Reach-v0": {"targets_clear_of_arm": False}},
+            env_id="armreach/Reach-v2",
+            deprecated_ids={
+                "armreach/Reach-v0": {"targets_clear_of_arm": False, "engine_drag": True},
+                "armreach/Reach-v1": {"engine_drag": True},
+            },
             load="armreach_core.tasks.reach.task:ReachTask",
             robot=DEFAULT_ROBOT,
             max_episode_steps=2048,

@@ -8,8 +8,11 @@ number in ``report.md`` can be traced to a run.
 
 from __future__ import annotations
 
+import concurrent.futures
+import multiprocessing
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -164,6 +167,60 @@ def _log(stream: TextIO | None, text: str) -> None:
         print(text, file=stream, flush=True)
 
 
+@dataclass(frozen=True)
+class _Job:
+    """One run of the experiment: a contender's seed, its settings and folder, and what to do with it."""
+
+    contender: int
+    label: str
+    seed: int
+    config: RunConfig
+    run_dir: Path
+    action: str
+
+
+def _train_and_evaluate(
+    job: _Job, episodes: int, backend: str, stream: TextIO | None, command: list[str] | None
+) -> tuple[float, EvaluationResult, dict[str, Any]]:
+    """Train ``job`` (unless its run is reused), evaluate it and save the evaluation in its folder."""
+    t0 = time.perf_counter()
+    if job.action != "reusing":
+        trained = train(job.config, job.run_dir, resume=job.action != "training", stream=stream, command=command)
+        if trained.interrupted:
+            raise KeyboardInterrupt
+    seconds = training_seconds(job.run_dir, time.perf_counter() - t0)
+    evaluation = evaluate_run(job.run_dir, episodes=episodes, backend=backend)
+    return seconds, evaluation, save_evaluation(evaluation, job.run_dir / f"eval-{backend}")
+
+
+def _run_jobs(
+    jobs: list[_Job], workers: int, episodes: int, backend: str, stream: TextIO | None, command: list[str] | None
+) -> Iterator[tuple[_Job, tuple[float, EvaluationResult, dict[str, Any]]]]:
+    """Each job's outcome, in the jobs' order: one after another, or ``workers`` processes side by side.
+
+    Side by side, each run trains in a process of its own (one torch and XLA thread each, the
+    training default) and shows no progress bar; Ctrl-C stops them all, each keeping its
+    checkpoint, so that the same command resumes.
+    """
+    if workers <= 1:
+        for job in jobs:
+            _log(stream, f"{job.action} {job.label}, seed {job.seed}: {job.run_dir}")
+            yield job, _train_and_evaluate(job, episodes, backend, stream, command)
+        return
+    context = multiprocessing.get_context("spawn")
+    with concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        futures = []
+        for job in jobs:
+            _log(stream, f"{job.action} {job.label}, seed {job.seed}: {job.run_dir}")
+            futures.append(pool.submit(_train_and_evaluate, job, episodes, backend, None, command))
+        try:
+            for job, future in zip(jobs, futures, strict=True):
+                yield job, future.result()
+        except BaseException:
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
+
+
 def run_experiment(
     out: Path,
     contenders: list[Contender],
@@ -174,16 +231,21 @@ def run_experiment(
     stream: TextIO | None = sys.stderr,
     eval_max_episode_steps: int = 2048,
     command: list[str] | None = None,
+    jobs: int = 1,
 ) -> tuple[list[ContenderResult], EvaluationResult]:
-    """Train and evaluate every contender for every seed (reusing finished runs), then the IK reference."""
+    """Train and evaluate every contender for every seed (reusing finished runs), then the IK reference.
+
+    ``jobs``: how many runs train at once, each in a process of its own.
+    """
     if seeds < 1:
         raise ConfigError(f"--seeds must be >= 1, got {seeds}")
     if episodes < 1:
         raise ConfigError(f"--episodes must be >= 1, got {episodes}")
+    if jobs < 1:
+        raise ConfigError(f"--jobs must be >= 1, got {jobs}")
     out.mkdir(parents=True, exist_ok=True)
-    results = []
-    for contender in contenders:
-        result = ContenderResult(contender)
+    planned = []
+    for index, contender in enumerate(contenders):
         for seed in range(seeds):
             config = resolve_config(
                 algo=contender.algo,
@@ -195,26 +257,24 @@ def run_experiment(
                 eval_max_episode_steps=eval_max_episode_steps,
             )
             run_dir = out / f"{contender.algo}{'-her' if contender.her else ''}-{config.preset}-s{seed}"
-            t0 = time.perf_counter()
             config, action = plan_run(run_dir, config)
-            _log(stream, f"{action} {contender.label}, seed {seed}: {run_dir}")
-            if action != "reusing":
-                trained = train(config, run_dir, resume=action != "training", stream=stream, command=command)
-                if trained.interrupted:
-                    raise KeyboardInterrupt
-            result.train_seconds.append(training_seconds(run_dir, time.perf_counter() - t0))
-            evaluation = evaluate_run(run_dir, episodes=episodes, backend=backend)
-            summary = save_evaluation(evaluation, run_dir / f"eval-{backend}")
-            _log(stream, f"  success {100 * summary['success_rate']:.0f}% over {episodes} episodes")
-            result.seeds.append(seed)
-            result.run_dirs.append(run_dir)
-            result.episode_rewards.append(episode_rewards(run_dir))
-            result.summaries.append(summary)
-            result.jerk_traces.append(evaluation.jerk_trace)
-            result.control_dt = evaluation.control_dt
-            result.timesteps.append(int(read_progress(run_dir).get("timesteps") or runs.read_config(run_dir).timesteps))
-            result.stopped.append(stopped_early(run_dir))
-        results.append(result)
+            planned.append(_Job(index, contender.label, seed, config, run_dir, action))
+    results = [ContenderResult(contender) for contender in contenders]
+    for job, (seconds, evaluation, summary) in _run_jobs(planned, jobs, episodes, backend, stream, command):
+        result = results[job.contender]
+        _log(stream, f"  {result.contender.label}, seed {job.seed}: success {100 * summary['success_rate']:.0f}% "
+                     f"over {episodes} episodes")  # fmt: skip
+        result.train_seconds.append(seconds)
+        result.seeds.append(job.seed)
+        result.run_dirs.append(job.run_dir)
+        result.episode_rewards.append(episode_rewards(job.run_dir))
+        result.summaries.append(summary)
+        result.jerk_traces.append(evaluation.jerk_trace)
+        result.control_dt = evaluation.control_dt
+        result.timesteps.append(
+            int(read_progress(job.run_dir).get("timesteps") or runs.read_config(job.run_dir).timesteps)
+        )
+        result.stopped.append(stopped_early(job.run_dir))
     ik_dir = runs.new_run_dir(out / "ik")  # nothing to train: always written afresh
     ik_config = resolve_config(
         algo="ik", preset="paper", backend=backend, eval_max_episode_steps=eval_max_episode_steps

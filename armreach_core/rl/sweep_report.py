@@ -107,6 +107,7 @@ def write_report(out: Path, rows: Sequence[Mapping[str, Any]], *, wall_seconds: 
             ),
         ),
         "",
+        *_time_split(ordered),
         "Every trial: `trials.csv`, `trials.json`; learning curves: `curves.png`.",
         "",
     ]
@@ -114,6 +115,40 @@ def write_report(out: Path, rows: Sequence[Mapping[str, Any]], *, wall_seconds: 
     report.write_text("\n".join(lines), encoding="utf-8")
     plot_curves(out / "curves.png", ordered)
     return report
+
+
+def _time_split(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The "Where the time went" section: each trial's training call split as ``timing.json`` splits it."""
+    from armreach_core.rl.timing import PARTS
+
+    timed = [r for r in rows if (r.get("timing") or {}).get("total")]
+    if not timed:
+        return []
+    names = {"env": "env", "rollout_other": "policy, buffer", "validation": "held-out evaluations",
+             "learner": "learner", "setup": "set-up"}  # fmt: skip
+    table = markdown_table(
+        ("trial", "training (min)", "env steps/s", *(f"{names[p]} %" for p in PARTS), "nice"),
+        (
+            (
+                r["trial"],
+                f"{r['timing']['total'] / 60:.1f}",
+                f"{r['timing'].get('timesteps', float('nan')) / r['timing']['total']:,.0f}",
+                *(f"{100 * r['timing'].get(p, 0.0) / r['timing']['total']:.0f}" for p in PARTS),
+                "–" if r.get("nice") is None else r["nice"],
+            )
+            for r in timed
+        ),
+    )
+    return [
+        "## Where the time went",
+        "",
+        "Each trial's training call (`timing.json` in its run folder): inside the envs' steps, the policy and replay",
+        "buffer while collecting, held-out evaluations, the learner's updates, and set-up; `nice`: the priority the",
+        "trial ran at.",
+        "",
+        table,
+        "",
+    ]
 
 
 def plot_curves(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:

@@ -63,10 +63,16 @@ def start_ray(address: str | None, cpus: int | None = None) -> Any:
     would join whatever cluster ``ray start`` (or Ray's test cluster) last recorded on
     this machine, and then refuse ``num_cpus``. Nothing happens when Ray is already
     initialized in this process.
+
+    Trials run at this process's own priority: Ray starts its workers at ``nice`` 15 unless
+    told otherwise, and then any process at the normal priority, Ray's own services and the
+    sweep's driver among them, takes the core from a training trial first. A
+    ``RAY_worker_niceness`` the user set wins.
     """
     ray = require_ray()
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
     os.environ.setdefault("RAY_DEDUP_LOGS", "0")
+    os.environ.setdefault("RAY_worker_niceness", str(os.nice(0)))
     if ray.is_initialized():
         return ray
     address = address or os.environ.get("RAY_ADDRESS")
@@ -133,7 +139,7 @@ def run_trial(trial: Trial, out: Path, callbacks: Sequence[Any] = ()) -> dict[st
         evaluation = evaluate_run(run_dir, episodes=trial.episodes, backend=trial.backend)
         summary = save_evaluation(evaluation, summary_file.parent)
         evaluated = True
-    where = {"host": platform.node(), "pid": os.getpid(), "ray_node": ray_node(), "action": action}
+    where = {"host": platform.node(), "pid": os.getpid(), "nice": os.nice(0), "ray_node": ray_node(), "action": action}
     (run_dir / TRIAL_RECORD).write_text(json.dumps(where), encoding="utf-8")
     row = trial_row(trial, run_dir, summary)
     row.update(evaluated=evaluated, train_seconds=training_seconds(run_dir, time.perf_counter() - t0))
@@ -143,6 +149,7 @@ def run_trial(trial: Trial, out: Path, callbacks: Sequence[Any] = ()) -> dict[st
 def trial_row(trial: Trial, run_dir: Path, summary: Mapping[str, Any]) -> dict[str, Any]:
     """The facts of a finished trial that the sweep's tables hold."""
     from armreach_core.rl.sweep_report import time_to_success
+    from armreach_core.rl.timing import read_timing
 
     steps95, seconds95 = time_to_success(run_dir)
     record = run_dir / TRIAL_RECORD
@@ -164,6 +171,8 @@ def trial_row(trial: Trial, run_dir: Path, summary: Mapping[str, Any]) -> dict[s
         "ended_by": dict(summary.get("ended_by", {})),
         "steps_to_95": steps95,
         "minutes_to_95": seconds95 / 60 if seconds95 == seconds95 else seconds95,
+        "nice": where.get("nice"),
+        "timing": read_timing(run_dir),
     }
 
 

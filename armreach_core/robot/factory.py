@@ -4,11 +4,13 @@ describes, once per spec and file version."""
 from __future__ import annotations
 
 import functools
+import os
 from dataclasses import replace
 from pathlib import Path
 
 from armreach_core.errors import ConfigError
 from armreach_core.robot.model import RobotModel
+from armreach_core.robot.packages import ROS_PACKAGE_PATH
 from armreach_core.robot.spec import ArmSpec
 from armreach_core.robot.urdf import allow_external_meshes_default
 
@@ -16,7 +18,8 @@ __all__ = ["build_robot"]
 
 
 @functools.lru_cache(maxsize=64)
-def _build(spec: ArmSpec, mtime: float) -> RobotModel:
+def _build(spec: ArmSpec, mtime: float, ros_package_path: str) -> RobotModel:
+    """The model; ``mtime`` and ``ros_package_path`` (read by the build itself) only key the cache."""
     assert spec.urdf is not None
     return RobotModel(
         spec.urdf,
@@ -36,8 +39,9 @@ def build_robot(spec: ArmSpec) -> RobotModel:
     """The model of ``spec``, which must name a URDF (resolve a registered robot's name with
     :func:`armreach_core.plugins.lookup.resolve_arm` first).
 
-    Models are cached per (spec, the file's modification time, the mesh rule in force), so
-    envs of one arm share one immutable model and an edited file is read again.
+    Models are cached per (spec, the file's modification time, the mesh rule in force,
+    ``ROS_PACKAGE_PATH``), so envs of one arm share one immutable model, an edited file is
+    read again, and a package path changed since finds the packages it now names.
 
     Raises:
         ConfigError: the spec names no URDF.
@@ -53,5 +57,5 @@ def build_robot(spec: ArmSpec) -> RobotModel:
     except (OSError, ValueError):  # a name too long to look up: reading it says why
         mtime = -1.0
     if mtime < 0:  # raises the URDFError, uncached
-        return _build.__wrapped__(spec, mtime)
-    return _build(spec, mtime)
+        return _build.__wrapped__(spec, mtime, "")
+    return _build(spec, mtime, os.environ.get(ROS_PACKAGE_PATH, ""))

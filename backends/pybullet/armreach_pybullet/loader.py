@@ -22,13 +22,15 @@ GROUND_RGBA = (0.86, 0.87, 0.89, 1.0)
 #: Mesh formats PyBullet's URDF loader reads; others are converted to .obj (armreach_core.robot.meshes).
 PYBULLET_MESHES = (".obj", ".stl", ".dae")
 
-#: Drag on the arm's links (PyBullet's ``linearDamping`` and ``angularDamping``). Bullet's default,
-#: 0.04, slows every moving link by ``0.04 (1 + |v|) v`` (and its rotation likewise), a force no
-#: URDF states and MuJoCo does not apply. While the motors hold their targets it is invisible
-#: (they are velocity constraints), but a motor at its effort yields to it: on the KUKA KR16
-#: under the parity's biased actions the engines parted by 13 mm in free space with it and by
-#: 0.02 mm without (docs/parity.md, "Heavy arms").
+#: Drag on the arm's links (PyBullet's ``linearDamping`` and ``angularDamping``) unless
+#: ``PhysicsConfig.engine_drag`` keeps Bullet's default, :data:`ENGINE_DRAG`, which slows every
+#: moving link by ``0.04 (1 + |v|) v`` (and its rotation likewise), a force no URDF states and
+#: MuJoCo does not apply. While the motors hold their targets it is invisible (they are velocity
+#: constraints), but a motor at its effort yields to it: on the KUKA KR16 under the parity's
+#: biased actions the engines parted by 13 mm in free space with it and by 0.02 mm without
+#: (docs/parity.md, "Heavy arms").
 LINK_DRAG = 0.0
+ENGINE_DRAG = 0.04
 
 #: A body's base pose as PyBullet takes it: position, quaternion (x, y, z, w).
 Pose = tuple[list[float], list[float]]
@@ -90,11 +92,13 @@ def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int
         raise URDFError(load_failure(robot, "loadURDF returned no body"))
     # Bullet drags every link of a multibody by default; the URDF states no such drag and MuJoCo
     # applies none, so the arm gets none (see LINK_DRAG)
-    pb.changeDynamics(body, -1, linearDamping=LINK_DRAG, angularDamping=LINK_DRAG, physicsClientId=cid)
+    if not physics.engine_drag:  # else Bullet's own default stays, bit for bit (a float 0.04)
+        pb.changeDynamics(body, -1, linearDamping=LINK_DRAG, angularDamping=LINK_DRAG, physicsClientId=cid)
     return int(body), base_pose
 
 
 __all__ = [
+    "ENGINE_DRAG",
     "GROUND_RGBA",
     "LINK_DRAG",
     "PYBULLET_MESHES",

@@ -29,7 +29,8 @@ def armreach_register_tasks(register: Register) -> None:
     register(
         TaskSpec(
             name="grasp",
-            env_id="armreach/Grasp-v0",
+            env_id="armreach/Grasp-v1",
+            deprecated_ids={"armreach/Grasp-v0": {"engine_drag": True}},
             load="armreach_grasp.task:GraspTask",
             robot=ROBOT,
             max_episode_steps=100,
