@@ -103,3 +103,38 @@ def test_kr210_motors_are_sized_from_its_masses() -> None:
 def test_an_arm_without_inertials_keeps_the_default_effort() -> None:
     robot = _robot("abb-irb140")  # effort="0" and no <inertial>: nothing to size from
     assert [joint.effort for joint in robot.joints] == [DEFAULT_EFFORT_LIMIT] * robot.dof
+
+
+def test_armreach_robot_marks_the_efforts_it_sized() -> None:
+    from armreach_core.diagnostics.robot_page import markdown
+    from armreach_core.diagnostics.robot_report import RobotReport, _robot_facts
+
+    arm = corpus_arm("kuka-kr16")
+    if arm.path is None:
+        pytest.skip(f"kuka-kr16 is not installed: {arm.install}")
+    pages = {}
+    for name, spec in (("kr16", arm.spec()), ("ar6", None)):
+        env = ArmEnv("reach", backend="pybullet", **({"arm": spec} if spec is not None else {}))
+        try:
+            report = RobotReport(urdf=str(env.robot.urdf_path))
+            _robot_facts(report, env)
+        finally:
+            env.close()
+        pages[name] = markdown(report)
+    assert pages["kr16"].count(" (sized) |") == 6
+    assert "| 116.1 (sized) |" in pages["kr16"]  # A2: 92.9 N·m at most, over 80 %
+    assert "effort limits the URDF does not give, sized" in pages["kr16"]
+    assert "(sized)" not in pages["ar6"]
+
+
+def test_a_large_arm_gets_a_reachability_map_its_samples_fill() -> None:
+    """KR210's map had 1,116 interior voxels (8 in its target ball, where a reset spent 0.4 s
+    rejecting draws); sized to its samples it has 7,057 (1,486 in the ball); UR10 keeps 40 mm."""
+    from armreach_core.robot.workspace import CELLS_PER_SAMPLE, SAMPLES, VOXEL, reachability_map
+    from armreach_core.tasks.reach.task import ReachTask
+
+    robot = _robot("kuka-kr210")
+    grid = reachability_map(robot).grid
+    assert grid.size <= 1.1 * CELLS_PER_SAMPLE * SAMPLES and grid.sum() > 5_000
+    assert len(ReachTask(robot).sampler.fallback) > 1_000  # type: ignore[attr-defined]
+    assert reachability_map(_robot("ur10")).voxel == VOXEL
