@@ -221,19 +221,26 @@ class Motors:
         views = isinstance(qpos_at, slice)
         q = data.qpos[qpos_at]  # a view of MjData when a slice
         aref = np.empty(n)
-        multiply, subtract, add = np.multiply, np.subtract, np.add
+        # with one gain for every motor (the usual case), MuJoCo's offset + (-k) q in one call: the
+        # same bits as numpy's offset - k * q (a negated product is exact), and ~0.3 µs cheaper
+        uniform = n > 0 and bool(stiffness.min() == stiffness.max())
+        scale = -float(stiffness[0]) if uniform else 0.0
+        multiply, subtract = np.multiply, np.subtract
+        add_scaled, add_to = mujoco.mju_addScl, mujoco.mju_addTo
         step1, step2 = mujoco.mj_step1, mujoco.mj_step2
         first = -1
         for _ in range(nstep):
             step1(model, data)
             if not views:
                 q = data.qpos[qpos_at]
-            multiply(q, stiffness, out=aref)
-            subtract(offset, aref, out=aref)
+            if uniform:
+                add_scaled(aref, offset, q, scale)
+            else:
+                multiply(q, stiffness, out=aref)
+                subtract(offset, aref, out=aref)
             if first < 0:  # the same rows in every physics step of one model
                 first = data.ne + data.nf - n
-            rows = data.efc_aref[first : first + n]
-            add(aref, rows, out=rows)
+            add_to(data.efc_aref[first : first + n], aref)
             step2(model, data)
 
 
