@@ -15,8 +15,8 @@ step (the bound :func:`armreach_core.backend.stable_damping` puts on joint dampi
 integrates ``kv`` (and joint damping) implicitly, so the servo stays stable also where a
 pose makes a joint lighter than at home. Unsaturated, one joint then moves each physics
 step half way from its velocity to ``v*``. Stiffer servos (``kv`` 2 to 1000 ``M_ii / dt``)
-were tried and were further from PyBullet: a force at its ``forcerange`` leaves MuJoCo's
-implicit step, so a saturated stiff servo is braked explicitly, and on the Panda, whose
+were tried and were further from PyBullet: MuJoCo leaves a force at its ``forcerange`` out
+of its implicit step, so a saturated stiff servo is damped explicitly, and on the Panda, whose
 joints 1, 3 and 5 are aligned at home, they drifted apart by 0.3 rad within ten control
 steps of random actions (0.002 rad at ``M_ii / dt``; ``docs/mujoco-backend.md``). The
 actuators also carry the arm's weight (MuJoCo's gravity compensation, within the effort),
