@@ -74,9 +74,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         joint_limit_penalty: subtracted from the reward on each step whose target left the
             joint limits, default 0 (the paper's reward). Training shaping: a policy trained
             with clipping and a penalty also keeps within the limits under the paper's rule.
-        self_collision, inertia_from_file, engine_drag: see
-            :class:`~armreach_core.backend.PhysicsConfig` (``engine_drag=True``: the dynamics
-            of older env ids).
+        self_collision, inertia_from_file, engine_drag: see :class:`~armreach_core.backend.PhysicsConfig`
+            (``engine_drag=True``: the dynamics of older env ids).
         camera: a :class:`~armreach_core.backend.Camera` for rendering.
         tool_joints: joints off the arm's chain to actuate too (a gripper's fingers);
             default the registered robot's (none for a ``urdf``).
