@@ -30,7 +30,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -289,8 +289,9 @@ def _judge_all(
     spread: dict[tuple[str, str], float],
     say: Callable[[str], None],
 ) -> tuple[PhysicsProfile, dict[tuple[str, str], float], dict[str, dict[str, Verdict]]]:
-    """Judge each joint's values; the least identified one goes back to its prior, the others are
-    fitted again around it and judged again, until every one left is identified (or none is left)."""
+    """Judge each joint's values. A value that does not matter goes back to its prior, and the others
+    are fitted again around it and judged again, until every one left is identified. A value that
+    trades off with others takes them along: fixed at its prior, it would bias them."""
     by_joint, columns = where
     spread = dict(spread)
     verdicts: dict[str, dict[str, Verdict]] = {}
@@ -305,12 +306,18 @@ def _judge_all(
             if not lost:
                 found.update(round_)
                 break
-            worst = min(lost, key=lambda k: round_[k].rise / round_[k].threshold)
-            found[worst] = round_[worst]
-            free.remove(worst)
-            prior, value = nominal.value(joint, worst) or 0.0, fitted.value(joint, worst) or 0.0
-            spread[(joint, worst)] = max(spread.get((joint, worst), 0.0), abs(value - prior), CHANGE * prior)
-            fitted = with_values(fitted, {joint: {worst: prior}})
+            traded = [k for k in lost if round_[k].held_rise >= round_[k].threshold]
+            if traded:  # the values it trades off with would be biased by its prior: none of them is identified
+                found.update({k: _traded(round_[k], traded) for k in free})
+                drop = list(free)
+            else:  # it does not matter: the others are fitted again with it at its prior
+                drop = [min(lost, key=lambda k: round_[k].rise / round_[k].threshold)]
+                found[drop[0]] = round_[drop[0]]
+            for key in drop:
+                free.remove(key)
+                prior, value = nominal.value(joint, key) or 0.0, fitted.value(joint, key) or 0.0
+                spread[(joint, key)] = max(spread.get((joint, key), 0.0), abs(value - prior), CHANGE * prior)
+                fitted = with_values(fitted, {joint: {key: prior}})
             if free:  # the others, around the prior
                 names = [(joint, k) for k in free]
                 fitted, again = fit_block(replays, fitted, limits, names, windows, REFIT_NFEV, columns[joint])
@@ -318,6 +325,14 @@ def _judge_all(
         verdicts[joint] = {k: found[k] for k in keys}
         say(f"{joint}: " + ", ".join(f"{k} {'' if v.identifiable else 'not '}identified" for k, v in found.items()))
     return fitted, spread, verdicts
+
+
+def _traded(verdict: Verdict, traded: list[str]) -> Verdict:
+    """``verdict`` of a value that another, ``traded``, trades off with: not identified on its own either."""
+    if not verdict.identifiable:
+        return verdict
+    reason = f"it is told only with {', '.join(traded)} held, which the logs do not identify (they trade off)"
+    return replace(verdict, identifiable=False, reason=reason)
 
 
 def replay_error(backend: Backend, logs: Sequence[JointLog], profile: PhysicsProfile) -> tuple[float, float]:
