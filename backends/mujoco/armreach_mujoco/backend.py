@@ -217,6 +217,14 @@ class MuJoCoBackend(Backend):
         self._dynamics.efforts[joint] = float(effort)
         dynamics.write_effort(self._writable(), self._compiled, self.robot, joint, float(effort))
 
+    def joint_armature(self, joint: str) -> float:
+        return float(self._model.dof_armature[self._compiled.qvel[dynamics.actuated(self.robot, joint)]])
+
+    def set_joint_armature(self, joint: str, armature: float) -> None:
+        dynamics.actuated(self.robot, joint)
+        self._dynamics.armatures[joint] = float(armature)
+        dynamics.write_armature(self._writable(), self._compiled, self.robot, joint, float(armature))
+
     def servo_gain(self, joint: str) -> float:
         if self._native:
             return dynamics.gain(self._model, self._compiled, self.robot, joint)

@@ -8,6 +8,7 @@ previous change, so repeated changes do not drift.
 
 * mass: ``body_mass``, with ``body_inertia`` scaled by the same ratio (same density);
 * damping: ``dof_damping``;
+* armature: ``dof_armature``, added to the joint's own diagonal of the mass matrix (0 as built);
 * friction: ``dof_frictionloss``, MuJoCo's Coulomb friction, solved as a constraint;
 * effort: the ``frictionloss`` of the joint's motor tendon, the bound of its motor row
   (:mod:`armreach_mujoco.servo`); with MuJoCo's position actuators (:mod:`armreach_mujoco.native`),
@@ -44,9 +45,10 @@ class Dynamics:
     frictions: dict[str, float] = field(default_factory=dict)
     efforts: dict[str, float] = field(default_factory=dict)
     gains: dict[str, float] = field(default_factory=dict)
+    armatures: dict[str, float] = field(default_factory=dict)
 
     def __bool__(self) -> bool:
-        return bool(self.masses or self.dampings or self.frictions or self.efforts or self.gains)
+        return bool(self.masses or self.dampings or self.frictions or self.efforts or self.gains or self.armatures)
 
     def own_copy(self, compiled: CompiledModel, robot: RobotModel) -> Any:
         """A copy of ``compiled.model`` with every change written into it."""
@@ -61,6 +63,8 @@ class Dynamics:
             write_effort(model, compiled, robot, joint, self.efforts[joint])
         for joint in self.gains:
             write_gain(model, compiled, robot, joint, self.gains[joint])
+        for joint in self.armatures:
+            write_armature(model, compiled, robot, joint, self.armatures[joint])
         return model
 
 
@@ -89,6 +93,10 @@ def write_mass(model: Any, compiled: CompiledModel, link: str, mass: float) -> N
 
 def write_damping(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, damping: float) -> None:
     model.dof_damping[compiled.qvel[actuated(robot, joint)]] = damping
+
+
+def write_armature(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, armature: float) -> None:
+    model.dof_armature[compiled.qvel[actuated(robot, joint)]] = armature
 
 
 def write_friction(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, friction: float) -> None:

@@ -28,7 +28,8 @@ by ``M_ii / dt``, the damping that stops the joint in one step, as the PyBullet 
 (:func:`armreach_core.backend.stable_damping`).
 
 Nothing here is fitted to an arm: the motor's only constants are PyBullet's gains. The
-arm gets no rotor inertia (armature) and no gravity compensation, as in PyBullet; URDF
+arm gets no rotor inertia (armature: 0 as built, a physics profile may set it) and no gravity
+compensation, as in PyBullet; URDF
 ``friction`` is dropped, as PyBullet ignores it.
 
 Joints the arm does not actuate (``robot.held_joints``) get the same motor, held at their

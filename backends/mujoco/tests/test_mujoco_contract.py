@@ -34,6 +34,7 @@ class TestMuJoCoContract(BackendContract):
                 "friction": 0.3,  # measured 0.887 rad
                 "gain": 0.14,  # measured 0.431 rad
                 "effort": 0.3,  # measured 0.918 rad
+                "armature": 0.018,  # measured 0.056 rad (2 kg m² on every joint)
             }
         ),
     )
