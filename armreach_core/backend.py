@@ -363,6 +363,16 @@ class Backend(Scene):
         """Bound the actuator of joint ``joint`` to ``effort`` (N·m or N)."""
         raise self._unsupported("changing dynamics")
 
+    def joint_armature(self, joint: str) -> float:
+        """Rotor inertia (armature) added to joint ``joint``'s own inertia (kg·m², or kg) as simulated
+        now; 0 as built. A backend without it raises :class:`NotImplementedError`: it cannot be fitted."""
+        raise self._unsupported("armature")
+
+    def set_joint_armature(self, joint: str, armature: float) -> None:
+        """Add ``armature`` to the diagonal of the joint-space mass matrix at joint ``joint`` only: a
+        motor's reflected rotor inertia, which loads its own joint and none above it."""
+        raise self._unsupported("armature")
+
     def servo_gain(self, joint: str) -> float:
         """Position gain of joint ``joint``'s servo relative to the backend's own (1 as built)."""
         raise self._unsupported("changing dynamics")

@@ -134,6 +134,28 @@ def test_motor_rows_are_the_last_friction_rows():
     env.close()
 
 
+@pytest.mark.parametrize("timestep", [1 / 240, 1 / 500, 1 / 1000, 0.01])
+def test_motor_reference_is_pybullets_law_to_the_bit(ar6_urdf, timestep):
+    """MuJoCo computes the motor rows' -v/dt itself (their solref) and Motors adds the position
+    term: the reference a physics step used must be the bits of (offset - k q) - v/dt, the formula
+    written out in numpy, for any timestep, or trajectories change."""
+    robot = RobotModel(ar6_urdf, ee_link="tool0", home=AR6_HOME)
+    backend = mjb.MuJoCoBackend(robot, PhysicsConfig(timestep=timestep, visuals=False))
+    model, data, motors = backend.model, backend.data, backend._io.motors
+    rng = np.random.default_rng(0)
+    n = len(motors.qvel)
+    stiffness = motors.gains / (timestep * timestep)
+    for _ in range(20):
+        data.qvel[motors.qvel] = rng.normal(0.0, 2.0, n)
+        motors.targets[:] = data.qpos[motors.qpos] + rng.uniform(-0.05, 0.05, n)
+        q, v = data.qpos[motors.qpos], data.qvel[motors.qvel]  # copies, before the step
+        want = (stiffness * motors.targets - stiffness * q) - v * (1.0 / timestep)
+        motors.step(model, data, 1)
+        first = data.ne + data.nf - n  # mj_step2 solves with the reference and leaves it in place
+        np.testing.assert_array_equal(data.efc_aref[first : first + n], want)
+    backend.close()
+
+
 def test_a_motor_pushes_with_its_effort_and_no_more():
     """A joint asked to move further than its effort allows moves as PyBullet's does."""
     pytest.importorskip("pybullet")

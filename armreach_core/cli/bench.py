@@ -13,7 +13,9 @@ from armreach_core.cli.robot_args import add_robot_arguments, description_kwargs
 
 def add_parser(sub: Any) -> None:
     parser = sub.add_parser("bench", help="benchmark every backend: JSON plus a markdown table")
-    parser.add_argument("--backends", nargs="+", default=None, help="backends (default: every installed one)")
+    parser.add_argument(
+        "--backends", nargs="+", default=None, help="backends (default: every installed one but variants)"
+    )
     parser.add_argument("--steps", type=int, default=5000, help="timed steps per measurement (default: 5000)")
     parser.add_argument("--repeats", type=int, default=5, help="repeats, taken in turns; the best is kept (default: 5)")
     parser.add_argument("--no-vector", action="store_true", help="skip the vectorized measurements")

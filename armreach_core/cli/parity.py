@@ -25,7 +25,10 @@ def add_parser(sub: Any) -> None:
         nargs="+",
         default=None,
         metavar="NAME",
-        help="backends to compare, the first is the reference (default: every installed one, default backend first)",
+        help=(
+            "backends to compare, the first is the reference "
+            "(default: every installed one but variants, default backend first)"
+        ),
     )
     parser.add_argument("--steps", type=int, default=200, help="env steps per control sequence (default: 200)")
     parser.add_argument(

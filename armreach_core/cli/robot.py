@@ -23,7 +23,9 @@ def add_parser(sub: Any) -> None:
     parser = sub.add_parser("robot", help="check an arm: joints, end effector, home, reach, cost, parity, IK")
     parser.add_argument("urdf", nargs="?", default=None, help="the arm's URDF (default: the bundled ar6)")
     add_robot_arguments(parser, urdf=False)
-    parser.add_argument("--backends", nargs="+", default=None, metavar="NAME", help="default: every installed one")
+    parser.add_argument(
+        "--backends", nargs="+", default=None, metavar="NAME", help="default: every installed one but variants"
+    )
     parser.add_argument("--steps", type=int, default=500, help="random-action steps timed per backend (default: 500)")
     parser.add_argument("--ik-episodes", type=int, default=20, help="IK reference episodes per backend (default: 20)")
     parser.add_argument(

@@ -11,7 +11,10 @@ from typing import Any
 def add_parser(sub: Any) -> None:
     parser = sub.add_parser("soak", help="step and recreate envs for a long time; report memory, fd and client growth")
     parser.add_argument(
-        "--backend", action="append", default=None, help="backend to soak (repeatable; default: every installed one)"
+        "--backend",
+        action="append",
+        default=None,
+        help="backend to soak (repeatable; default: every installed one but variants)",
     )
     parser.add_argument("--steps", type=int, default=1_000_000, help="random-action env steps (default: 1,000,000)")
     parser.add_argument("--cycles", type=int, default=500, help="env create/close cycles (default: 500)")

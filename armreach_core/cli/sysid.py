@@ -12,14 +12,15 @@ from armreach_core.plugins.defaults import DEFAULT_BACKEND
 
 
 def add_parser(sub: Any) -> None:
-    parser = sub.add_parser("sysid", help="fit damping, friction, effort and latency of an arm to joint logs")
+    parser = sub.add_parser("sysid", help="fit damping, friction, armature, effort and latency of an arm to joint logs")
     parser.add_argument("logs", nargs="+", type=Path, metavar="LOG", help="joint logs (.csv or .npz) to fit")
     add_robot_arguments(parser)
     parser.add_argument("--backend", default=DEFAULT_BACKEND, help=f"engine to fit (default: {DEFAULT_BACKEND})")
     parser.add_argument(
         "--fit",
-        default="damping,friction",
-        help="values to fit, of damping,friction,effort (default: damping,friction)",
+        default=None,
+        help="values to fit, of damping,friction,armature,effort (default: damping,friction and armature where "
+        "the backend has it)",
     )
     parser.add_argument("--max-latency", type=int, default=3, help="latencies tried, control steps (default: 3)")
     parser.add_argument("--check", nargs="+", type=Path, default=None, metavar="LOG", help="held-out logs to score")
@@ -38,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     check_out(args.out)
     logs = [read_joint_log(path) for path in args.logs]
     held = [read_joint_log(path) for path in args.check or ()]
-    keys = tuple(k.strip() for k in args.fit.split(",") if k.strip())
+    keys = None if args.fit is None else tuple(k.strip() for k in args.fit.split(",") if k.strip())
     world = make_backend(arm_spec(args), args.backend, timestep=args.timestep, substeps=args.substeps)
     try:
         result = identify(world, logs, keys=keys, max_latency=args.max_latency, progress=print)

@@ -74,8 +74,8 @@ def run_parity(
     """Measure kinematic and dynamic parity and speed of ``backends`` (the first is the reference).
 
     Args:
-        backends: two or more registered backend names; default every registered one,
-            :data:`~armreach_core.plugins.defaults.DEFAULT_BACKEND` first.
+        backends: two or more registered backend names; default every registered one but
+            variants of others, :data:`~armreach_core.plugins.defaults.DEFAULT_BACKEND` first.
         urdf: the arm; default the bundled ar6.
         ee_link: the end-effector link; default the robot's.
         steps: env steps of each control sequence.
@@ -89,7 +89,7 @@ def run_parity(
         ConfigError: fewer than two distinct backends, or bad counts.
     """
     if backends is None:
-        registered = available_backends()
+        registered = available_backends(variants=False)
         backends = sorted(registered, key=lambda name: name != DEFAULT_BACKEND)
     names = tuple(dict.fromkeys(backends))
     if len(names) < 2:

@@ -251,7 +251,8 @@ def inspect_robot(
     """Everything ``armreach robot`` reports; problems that make the arm unusable are in ``problems``."""
     kwargs = {"urdf": urdf, **dict(env_kwargs or {})}
     report = RobotReport(urdf=str(urdf) if urdf is not None else "(bundled)")
-    names = list(backends) if backends is not None else sorted(available_backends(), key=lambda b: b != DEFAULT_BACKEND)
+    registered = available_backends(variants=False)  # variants run only where named
+    names = list(backends) if backends is not None else sorted(registered, key=lambda b: b != DEFAULT_BACKEND)
     try:
         probe = ArmEnv(DEFAULT_TASK, backend=names[0], **kwargs)
     except ArmReachError as exc:

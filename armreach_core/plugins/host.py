@@ -272,9 +272,11 @@ def unregister_plugin(name: str) -> None:
     get_host().unregister_plugin(name)
 
 
-def available_backends() -> list[str]:
-    """Names of the registered backends (their engines may still be missing)."""
-    return sorted(get_host().registry.backends)
+def available_backends(*, variants: bool = True) -> list[str]:
+    """Names of the registered backends (their engines may still be missing); without ``variants``,
+    those that are no other backend's variant (:attr:`~armreach_core.plugins.specs.BackendSpec.variant_of`)."""
+    backends = get_host().registry.backends
+    return sorted(name for name, spec in backends.items() if variants or spec.variant_of is None)
 
 
 def available_tasks() -> list[str]:

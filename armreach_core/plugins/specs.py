@@ -85,6 +85,9 @@ class BackendSpec:
         description: one line for ``armreach plugins``.
         probes: the backend's :class:`BackendProbes` as ``"module:attr"`` (or a callable
             returning them; resolving imports the engine), or ``None``.
+        variant_of: the backend this one is a variant of (the same engine with another
+            setting, e.g. another motor), or ``None``. A variant runs only where it is named:
+            the commands and tests that take "every installed backend" leave it out.
     """
 
     name: str
@@ -92,6 +95,7 @@ class BackendSpec:
     install: str
     description: str = ""
     probes: Ref | None = None
+    variant_of: str | None = None
 
     def backend_class(self) -> type[Backend]:
         """The Backend subclass (imports the engine)."""

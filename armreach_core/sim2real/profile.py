@@ -29,8 +29,9 @@ which domain randomization takes its ranges.
       shoulder_pan_joint: {damping: 0.02, friction: 0.4, effort: 1.1}
 
 Values go to the backend through its dynamics setters (:class:`~armreach_core.backend.Backend`).
-Neither bundled backend sets armature yet: a profile with armature is refused by them.
-MuJoCo's runtime damping is not bounded by ``M_ii / dt`` (see ``docs/sim2real.md``).
+Armature runs on MuJoCo (``dof_armature``); PyBullet has none (Bullet's multibody has no rotor
+inertia, and a link's inertia would also load the joints above it), so it refuses a profile
+with armature. MuJoCo's runtime damping is not bounded by ``M_ii / dt`` (see ``docs/sim2real.md``).
 """
 
 from __future__ import annotations

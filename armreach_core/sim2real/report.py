@@ -1,9 +1,9 @@
 """The report of ``armreach sysid``: the profile, the fitted values with their spread, and plots.
 
 :func:`write_report` writes into one folder ``profile.yaml`` (the fitted profile),
-``report.json`` (every figure), ``report.md`` (a table of the values, nominal, fitted and
-their spread, and the replay errors) and ``joints.png`` (per joint: logged, simulated before
-and simulated after the fit, on the first log).
+``report.json`` (every figure), ``report.md`` (a table of the values, nominal, fitted,
+their spread, whether the logs identify them and why not, and the replay errors) and
+``joints.png`` (per joint: logged, simulated before and simulated after the fit, on the first log).
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from armreach_core.sim2real.identifiability import CHANGE
 from armreach_core.sim2real.profile import randomization_ranges, save_profile
 from armreach_core.sim2real.sysid import Identification
 
@@ -25,6 +26,7 @@ def summary(result: Identification, held_out: dict[str, tuple[float, float]] | N
                 "fitted": result.profile.value(joint, key),
                 "spread": result.profile.spread.get(joint, {}).get(key),
                 "identifiable": result.identifiable.get(joint, {}).get(key),
+                **_verdict(result, joint, key),
             }
             for key in values
         }
@@ -44,6 +46,18 @@ def summary(result: Identification, held_out: dict[str, tuple[float, float]] | N
         data["held_out_rms_rad"] = {k: v[0] for k, v in held_out.items()}
         data["held_out_ee_rms_m"] = {k: v[1] for k, v in held_out.items()}
     return data
+
+
+def _verdict(result: Identification, joint: str, key: str) -> dict[str, Any]:
+    verdict = result.verdicts.get(joint, {}).get(key)
+    if verdict is None:
+        return {}
+    return {
+        "rise_rad": verdict.rise,
+        "held_rise_rad": verdict.held_rise,
+        "resolution_rad": verdict.threshold,
+        "why_not": verdict.reason,
+    }
 
 
 def _markdown(data: dict[str, Any]) -> str:
@@ -71,13 +85,23 @@ def _markdown(data: dict[str, Any]) -> str:
         "Domain randomization centred on this profile (train with `--physics` and a preset's `env.randomize`):",
         f"`{json.dumps(data['randomize'])}`.",
     ]
-    lines += ["", "| joint | value | nominal | fitted | spread | identifiable |", "|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        f"Identifiable: a {CHANGE:.0%} change of the value, the joint's other values refitted, raises the replay "
+        "error (rise, rad RMS over the joint's windows) at least to its resolution. A value not identifiable "
+        "keeps its prior (nominal).",
+        "",
+        "| joint | value | nominal | fitted | spread | identifiable | rise (rad) | why not |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for joint, values in data["values"].items():
         for key, v in values.items():
             spread = "" if v["spread"] is None else f"{v['spread']:.4g}"
+            judged = "" if v["identifiable"] is None else ("yes" if v["identifiable"] else "no")
+            rise = f"{v['rise_rad']:.1e}" if "rise_rad" in v else ""
             lines.append(
-                f"| {joint} | {key} | {v['nominal']:.4g} | {v['fitted']:.4g} | {spread} | "
-                f"{'yes' if v['identifiable'] else 'no'} |"
+                f"| {joint} | {key} | {v['nominal']:.4g} | {v['fitted']:.4g} | {spread} | {judged} | {rise} | "
+                f"{v.get('why_not', '')} |"
             )
     return "\n".join(lines) + "\n"
 

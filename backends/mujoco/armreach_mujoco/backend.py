@@ -28,7 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.backend import ArmState, Backend, BodyState, Camera, PhysicsConfig, shape_size
-from armreach_core.errors import ArmReachError
+from armreach_core.errors import ArmReachError, ConfigError
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_mujoco import dynamics
 from armreach_mujoco.clearance import Clearance
@@ -40,6 +40,8 @@ from armreach_mujoco.state import StateIO
 from armreach_mujoco.viewer import LiveViewer
 from armreach_mujoco.world import Box, Extras, Marker
 
+#: The motors a MuJoCo backend can drive its joints with (see :class:`MuJoCoBackend`).
+MOTORS = ("pybullet", "native")
 #: MuJoCo warnings raised when a step diverges (it then resets the state to the model's defaults).
 _INSTABILITY_WARNINGS = (
     mujoco.mjtWarning.mjWARN_BADQACC,
@@ -50,12 +52,27 @@ _INSTABILITY_WARNINGS = (
 
 
 class MuJoCoBackend(Backend):
-    """The optional MuJoCo backend."""
+    """The optional MuJoCo backend.
+
+    Args:
+        motor: ``"pybullet"`` (default), PyBullet's position motor solved by MuJoCo
+            (:mod:`~armreach_mujoco.servo`); or ``"native"``, MuJoCo's own position actuators
+            (:mod:`~armreach_mujoco.native`), the ``mujoco-native`` backend.
+    """
 
     name = "mujoco"
+    #: The motor of a backend built without ``motor=``.
+    motor = "pybullet"
 
-    def __init__(self, robot: RobotModel, physics: PhysicsConfig, *, viewer: bool = False) -> None:
+    def __init__(
+        self, robot: RobotModel, physics: PhysicsConfig, *, viewer: bool = False, motor: str | None = None
+    ) -> None:
+        motor = self.motor if motor is None else motor
+        if motor not in MOTORS:
+            raise ConfigError(f"motor={motor!r} is not a MuJoCo motor; use one of {MOTORS}")
         super().__init__(robot, physics, viewer=viewer)
+        self.motor = motor
+        self._native = motor == "native"
         self._window: LiveViewer | None = None
         self._extras = Extras()
         self._clearance: Clearance | None = None
@@ -63,7 +80,7 @@ class MuJoCoBackend(Backend):
         self._diverged = False
         self._renderer: Renderer | None = None
         self._dynamics = dynamics.Dynamics()  # this env's changes; its model is then its own copy
-        self._load(compiled_model(robot, physics), None)
+        self._load(compiled_model(robot, physics, native=self._native), None)
 
     def _load(self, compiled: CompiledModel, old: StateIO | None) -> None:
         self._compiled, self._model = compiled, compiled.model
@@ -83,7 +100,7 @@ class MuJoCoBackend(Backend):
         self._close_views()  # they drew the old model
 
     def _rebuild(self, extras: Extras) -> None:
-        self._load(compiled_model(self.robot, self.physics, extras), self._io)
+        self._load(compiled_model(self.robot, self.physics, extras, self._native), self._io)
         self._extras = extras
 
     def _live(self) -> StateIO:
@@ -193,17 +210,32 @@ class MuJoCoBackend(Backend):
         dynamics.write_friction(self._writable(), self._compiled, self.robot, joint, float(friction))
 
     def effort_limit(self, joint: str) -> float:
-        return float(self._model.tendon_frictionloss[self._compiled.motors[dynamics.actuated(self.robot, joint)]])
+        return dynamics.effort(self._model, self._compiled, self.robot, joint)
 
     def set_effort_limit(self, joint: str, effort: float) -> None:
         dynamics.actuated(self.robot, joint)
         self._dynamics.efforts[joint] = float(effort)
         dynamics.write_effort(self._writable(), self._compiled, self.robot, joint, float(effort))
 
+    def joint_armature(self, joint: str) -> float:
+        return float(self._model.dof_armature[self._compiled.qvel[dynamics.actuated(self.robot, joint)]])
+
+    def set_joint_armature(self, joint: str, armature: float) -> None:
+        dynamics.actuated(self.robot, joint)
+        self._dynamics.armatures[joint] = float(armature)
+        dynamics.write_armature(self._writable(), self._compiled, self.robot, joint, float(armature))
+
     def servo_gain(self, joint: str) -> float:
+        if self._native:
+            return dynamics.gain(self._model, self._compiled, self.robot, joint)
         return float(self._io.motors.gains[dynamics.actuated(self.robot, joint)] / POSITION_GAIN)
 
     def set_servo_gain(self, joint: str, scale: float) -> None:
+        if self._native:  # the actuator's kp, in the model
+            dynamics.actuated(self.robot, joint)
+            self._dynamics.gains[joint] = float(scale)
+            dynamics.write_gain(self._writable(), self._compiled, self.robot, joint, float(scale))
+            return
         self._live().motors.gains[dynamics.actuated(self.robot, joint)] = POSITION_GAIN * float(scale)
 
     # -- markers -----------------------------------------------------------------------
@@ -328,4 +360,11 @@ class MuJoCoBackend(Backend):
             self.close()
 
 
-__all__ = ["MuJoCoBackend", "clear_cache", "compiled_model"]
+class NativeMuJoCoBackend(MuJoCoBackend):
+    """MuJoCo with its own position actuators (``motor="native"``): the ``mujoco-native`` backend."""
+
+    name = "mujoco-native"
+    motor = "native"
+
+
+__all__ = ["MOTORS", "MuJoCoBackend", "NativeMuJoCoBackend", "clear_cache", "compiled_model"]

@@ -23,6 +23,7 @@ import numpy.typing as npt
 from armreach_core.backend import PhysicsConfig
 from armreach_core.errors import URDFError
 from armreach_core.robot.model import RobotModel
+from armreach_mujoco import native as native_motor
 from armreach_mujoco import servo, world
 from armreach_mujoco.engine import log
 from armreach_mujoco.urdf_import import spec_from_urdf
@@ -47,14 +48,17 @@ class CompiledModel:
         model: the ``mujoco.MjModel``, shared by every env built from the same inputs: read only.
         qpos, qvel: addresses of the robot's joints in ``qpos`` and ``qvel``, in
             ``robot.joint_names`` order (read-only arrays); motors: the ids of their motor
-            tendons (:mod:`armreach_mujoco.servo`).
+            tendons (:mod:`armreach_mujoco.servo`), or with ``native`` of their position
+            actuators (:mod:`armreach_mujoco.native`).
         bodies: MuJoCo body id by MuJoCo body name (URDF links keep their names).
         mocap: mocap index of each marker, by marker name.
         free: ``(qpos address, dof address)`` of each free box's joint, by box name.
         movable: mocap index of each movable fixed shape (``add_shape``), by its name.
         held_qpos, held_qvel: addresses of ``robot.held_joints`` in ``qpos`` and ``qvel``.
         held_servos: indices in ``robot.held_joints`` of those held by a motor (the others
-            follow their master through a joint equality); held_motors: their motor tendons.
+            follow their master through a joint equality); held_motors: their motor tendons
+            (or actuators).
+        native: the motors are MuJoCo's position actuators, not PyBullet's motor.
     """
 
     model: Any
@@ -69,18 +73,21 @@ class CompiledModel:
     held_servos: Index = field(default_factory=lambda: _index([]))
     held_motors: Index = field(default_factory=lambda: _index([]))
     movable: Mapping[str, int] = field(default_factory=lambda: MappingProxyType({}))
+    native: bool = False
 
 
 _cache: OrderedDict[tuple[Any, ...], CompiledModel] = OrderedDict()
 _cache_lock = threading.Lock()
 
 
-def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> CompiledModel:
-    """Build and compile a model (uncached: use :func:`compiled_model`)."""
+def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras, native: bool = False) -> CompiledModel:
+    """Build and compile a model (uncached: use :func:`compiled_model`); ``native``: MuJoCo's position actuators."""
     spec = spec_from_urdf(robot, physics.visuals)
     world.set_options(spec, physics)
+    if native:
+        native_motor.set_options(spec)
     world.set_arm_contacts(spec, robot, physics)
-    servo.add_servos(spec, robot)
+    servo.add_servos(spec, robot, native_motor.add_actuator if native else None)
     world.add_scene(spec, physics, extras)
     world.add_contact_pairs(spec, robot, physics, extras)
     try:
@@ -96,19 +103,20 @@ def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> Compiled
     names = robot.joint_names
     qpos = _index([int(model.jnt_qposadr[model.joint(n).id]) for n in names])
     qvel = _index([int(model.jnt_dofadr[model.joint(n).id]) for n in names])
-    motors = _index([int(model.tendon(servo.MOTOR_PREFIX + n).id) for n in names])
+    motor_id = model.actuator if native else model.tendon
+    motors = _index([int(motor_id(servo.MOTOR_PREFIX + n).id) for n in names])
     held = [j.name for j in robot.held_joints]
     held_qpos = _index([int(model.jnt_qposadr[model.joint(n).id]) for n in held])
     held_qvel = _index([int(model.jnt_dofadr[model.joint(n).id]) for n in held])
     held_servos = _index(servo.servoed_held(robot))
-    held_motors = _index([int(model.tendon(servo.MOTOR_PREFIX + held[i]).id) for i in held_servos])
+    held_motors = _index([int(motor_id(servo.MOTOR_PREFIX + held[i]).id) for i in held_servos])
     held_home = robot.held_positions(robot.home)
-    servo.cap_damping(
-        model,
-        np.concatenate((qpos, held_qpos)),
-        np.concatenate((qvel, held_qvel[held_servos])),
-        np.concatenate((robot.home, held_home)),
-    )
+    motor_qpos = np.concatenate((qpos, held_qpos))
+    motor_qvel = np.concatenate((qvel, held_qvel[held_servos]))
+    motor_home = np.concatenate((robot.home, held_home))
+    servo.cap_damping(model, motor_qpos, motor_qvel, motor_home)
+    if native:
+        native_motor.set_gains(model, motor_qpos, motor_qvel, motor_home)
 
     bodies = {model.body(i).name: i for i in range(model.nbody)}
     mocap = {m.name: int(model.body_mocapid[bodies[world.MARKER_PREFIX + m.name]]) for m in extras.markers}
@@ -131,11 +139,15 @@ def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras) -> Compiled
         held_servos=held_servos,
         held_motors=held_motors,
         movable=MappingProxyType(movable),
+        native=native,
     )
 
 
-def compiled_model(robot: RobotModel, physics: PhysicsConfig, extras: Extras | None = None) -> CompiledModel:
-    """The compiled model for ``robot``, cached per (URDF, mtime, content, home, joints, base pose, physics, extras).
+def compiled_model(
+    robot: RobotModel, physics: PhysicsConfig, extras: Extras | None = None, native: bool = False
+) -> CompiledModel:
+    """The compiled model for ``robot``, cached per (URDF, mtime, content, home, joints, base pose, physics,
+    extras, motor).
 
     The constants of this package are not part of the key: after changing one, call
     :func:`clear_cache`.
@@ -155,13 +167,14 @@ def compiled_model(robot: RobotModel, physics: PhysicsConfig, extras: Extras | N
         robot.base_orientation,
         physics,
         extras,
+        native,
     )
     with _cache_lock:
         hit = _cache.get(key)
         if hit is not None:
             _cache.move_to_end(key)
             return hit
-    compiled = build(robot, physics, extras)
+    compiled = build(robot, physics, extras, native)
     with _cache_lock:
         _cache[key] = compiled
         while len(_cache) > MODEL_CACHE_SIZE:

@@ -8,11 +8,14 @@ previous change, so repeated changes do not drift.
 
 * mass: ``body_mass``, with ``body_inertia`` scaled by the same ratio (same density);
 * damping: ``dof_damping``;
+* armature: ``dof_armature``, added to the joint's own diagonal of the mass matrix (0 as built);
 * friction: ``dof_frictionloss``, MuJoCo's Coulomb friction, solved as a constraint;
 * effort: the ``frictionloss`` of the joint's motor tendon, the bound of its motor row
-  (:mod:`armreach_mujoco.servo`).
+  (:mod:`armreach_mujoco.servo`); with MuJoCo's position actuators (:mod:`armreach_mujoco.native`),
+  the actuator's ``forcerange``;
+* gain, with MuJoCo's position actuators only: the actuator's ``kp``, scaled.
 
-A motor's position gain is not part of the model: it lives with the env's motors
+PyBullet's motor's position gain is not part of the model: it lives with the env's motors
 (:class:`armreach_mujoco.servo.Motors`).
 """
 
@@ -41,9 +44,11 @@ class Dynamics:
     dampings: dict[str, float] = field(default_factory=dict)
     frictions: dict[str, float] = field(default_factory=dict)
     efforts: dict[str, float] = field(default_factory=dict)
+    gains: dict[str, float] = field(default_factory=dict)
+    armatures: dict[str, float] = field(default_factory=dict)
 
     def __bool__(self) -> bool:
-        return bool(self.masses or self.dampings or self.frictions or self.efforts)
+        return bool(self.masses or self.dampings or self.frictions or self.efforts or self.gains or self.armatures)
 
     def own_copy(self, compiled: CompiledModel, robot: RobotModel) -> Any:
         """A copy of ``compiled.model`` with every change written into it."""
@@ -56,6 +61,10 @@ class Dynamics:
             write_friction(model, compiled, robot, joint, self.frictions[joint])
         for joint in self.efforts:
             write_effort(model, compiled, robot, joint, self.efforts[joint])
+        for joint in self.gains:
+            write_gain(model, compiled, robot, joint, self.gains[joint])
+        for joint in self.armatures:
+            write_armature(model, compiled, robot, joint, self.armatures[joint])
         return model
 
 
@@ -86,6 +95,10 @@ def write_damping(model: Any, compiled: CompiledModel, robot: RobotModel, joint:
     model.dof_damping[compiled.qvel[actuated(robot, joint)]] = damping
 
 
+def write_armature(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, armature: float) -> None:
+    model.dof_armature[compiled.qvel[actuated(robot, joint)]] = armature
+
+
 def write_friction(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, friction: float) -> None:
     dof = compiled.qvel[actuated(robot, joint)]
     model.dof_frictionloss[dof] = friction
@@ -96,6 +109,28 @@ def write_friction(model: Any, compiled: CompiledModel, robot: RobotModel, joint
     model.dof_solimp[dof, :2] = FRICTION_IMPEDANCE
 
 
+def effort(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str) -> float:
+    motor = compiled.motors[actuated(robot, joint)]
+    return float(model.actuator_forcerange[motor, 1] if compiled.native else model.tendon_frictionloss[motor])
+
+
 def write_effort(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, effort: float) -> None:
-    i = actuated(robot, joint)
-    model.tendon_frictionloss[compiled.motors[i]] = effort
+    motor = compiled.motors[actuated(robot, joint)]
+    if compiled.native:
+        model.actuator_forcerange[motor] = (-effort, effort)
+    else:
+        model.tendon_frictionloss[motor] = effort
+
+
+def gain(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str) -> float:
+    """A position actuator's ``kp`` relative to the built one."""
+    motor = compiled.motors[actuated(robot, joint)]
+    return float(model.actuator_gainprm[motor, 0] / compiled.model.actuator_gainprm[motor, 0])
+
+
+def write_gain(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, scale: float) -> None:
+    """Scale a position actuator's ``kp`` (its stiffness: force ``kp (target - q) - kv qd``)."""
+    motor = compiled.motors[actuated(robot, joint)]
+    kp = float(compiled.model.actuator_gainprm[motor, 0]) * scale
+    model.actuator_gainprm[motor, 0] = kp
+    model.actuator_biasprm[motor, 1] = -kp

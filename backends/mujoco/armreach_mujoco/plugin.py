@@ -1,4 +1,7 @@
-"""Registers the MuJoCo backend. Importing this module does not import mujoco."""
+"""Registers the MuJoCo backend, and its variant with MuJoCo's own position actuators (``mujoco-native``).
+
+Importing this module does not import mujoco.
+"""
 
 from __future__ import annotations
 
@@ -15,5 +18,15 @@ def armreach_register_backends(register: Register) -> None:
             install="pip install armreach-mujoco mujoco",
             description="MuJoCo, model built from the same URDF with MjSpec (optional backend)",
             probes="armreach_mujoco.probes:PROBES",
+        )
+    )
+    register(
+        BackendSpec(
+            name="mujoco-native",
+            load="armreach_mujoco.backend:NativeMuJoCoBackend",
+            install="pip install armreach-mujoco mujoco",
+            description="MuJoCo with its own position actuators instead of PyBullet's motor (faster, less alike)",
+            probes="armreach_mujoco.probes:PROBES",
+            variant_of="mujoco",
         )
     )

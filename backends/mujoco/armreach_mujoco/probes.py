@@ -11,6 +11,7 @@ from armreach_core.plugins.specs import BackendProbes
 from armreach_core.robot.model import FloatArray
 from armreach_mujoco.backend import MuJoCoBackend
 from armreach_mujoco.engine import mujoco
+from armreach_mujoco.native import NativeMotors
 from armreach_mujoco.servo import Motors
 
 
@@ -19,10 +20,10 @@ def bare_loop(backend: Backend, deltas: FloatArray) -> None:
     which are part of the engine's work here: MuJoCo has no position motor of PyBullet's kind)."""
     assert isinstance(backend, MuJoCoBackend)
     compiled, substeps = backend.compiled, backend.physics.substeps
-    model, data = compiled.model, backend.data
+    model, data = backend.model, backend.data
     lower, upper = backend.robot.lower, backend.robot.upper
     qpos_index, qvel_index = compiled.qpos, compiled.qvel
-    motors = Motors(compiled.qpos, compiled.qvel)
+    motors = (NativeMotors if compiled.native else Motors)(compiled.qpos, compiled.qvel)
     ee = compiled.bodies[backend.robot.ee_link]
     q = data.qpos[qpos_index]  # indexing with an array copies
     for delta in deltas:
@@ -36,8 +37,11 @@ def bare_loop(backend: Backend, deltas: FloatArray) -> None:
 
 def engine_seconds(backend: Backend, deltas: FloatArray) -> float:
     """The bare loop, timing only MuJoCo's own step calls (``mj_step1``, ``mj_step2``): the motor's
-    reference, written between them, and everything else is left out."""
+    reference, written between them, and everything else is left out. With MuJoCo's own actuators
+    (``mujoco-native``), the one ``mj_step`` call of a control step."""
     assert isinstance(backend, MuJoCoBackend)
+    if backend.compiled.native:
+        return _native_engine_seconds(backend, deltas)
     compiled, substeps = backend.compiled, backend.physics.substeps
     model, data = compiled.model, backend.data
     lower, upper = backend.robot.lower, backend.robot.upper
@@ -60,6 +64,23 @@ def engine_seconds(backend: Backend, deltas: FloatArray) -> float:
             t0 = clock()
             step2(model, data)
             total += clock() - t0
+        mujoco.mj_kinematics(model, data)
+        q = data.qpos[compiled.qpos]
+    return total
+
+
+def _native_engine_seconds(backend: MuJoCoBackend, deltas: FloatArray) -> float:
+    compiled, substeps = backend.compiled, backend.physics.substeps
+    model, data = backend.model, backend.data
+    lower, upper = backend.robot.lower, backend.robot.upper
+    clock, step = time.perf_counter, mujoco.mj_step
+    total = 0.0
+    q = data.qpos[compiled.qpos]
+    for delta in deltas:
+        data.ctrl[: len(q)] = np.minimum(np.maximum(q + delta, lower), upper)
+        t0 = clock()
+        step(model, data, substeps)
+        total += clock() - t0
         mujoco.mj_kinematics(model, data)
         q = data.qpos[compiled.qpos]
     return total

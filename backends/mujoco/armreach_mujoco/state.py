@@ -18,6 +18,7 @@ from armreach_core.errors import ArmReachError
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_mujoco.compiled import CompiledModel
 from armreach_mujoco.engine import mujoco
+from armreach_mujoco.native import NativeMotors
 from armreach_mujoco.servo import Motors
 from armreach_mujoco.world import BODY_PREFIX
 
@@ -37,7 +38,8 @@ class StateIO:
         self._has_free = bool(compiled.free)
         servoed = compiled.held_servos
         #: the motors: the arm's joints first, then the held joints that have one
-        self.motors = Motors(
+        kind = NativeMotors if compiled.native else Motors
+        self.motors: Motors | NativeMotors = kind(
             np.concatenate((self._qpos, compiled.held_qpos[servoed])),
             np.concatenate((self._qvel, compiled.held_qvel[servoed])),
         )

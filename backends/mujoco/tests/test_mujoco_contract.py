@@ -34,6 +34,7 @@ class TestMuJoCoContract(BackendContract):
                 "friction": 0.3,  # measured 0.887 rad
                 "gain": 0.14,  # measured 0.431 rad
                 "effort": 0.3,  # measured 0.918 rad
+                "armature": 0.018,  # measured 0.056 rad (2 kg m² on every joint)
             }
         ),
     )
@@ -44,4 +45,31 @@ class TestMuJoCoContract(BackendContract):
             # damping of MuJoCo's Euler step diverge at step 16 (PyBullet holds).
             "damping": "a damping above M_ii/dt set after build diverges (wrist 2 at 9.6 N m s/rad)",
         }
+    )
+
+
+class TestMuJoCoNativeContract(BackendContract):
+    """MuJoCo's own position actuators (``mujoco-native``) keep the same contract.
+
+    Measured as above with ``load_backend_class("mujoco-native")``. Gravity compensation and
+    the servo's stiffness hold a pose and reach a target to rounding, and the implicit
+    integrator keeps the damping change stable (the default motor diverges there).
+    """
+
+    backend = "mujoco-native"
+    bounds = ContractBounds(
+        fk_m=6e-16,  # the default motor's bound: the same kinematics (parity: 5.9e-16 m for both)
+        hold_rad=1e-12,  # measured 1.5e-32 rad after 1 s at home
+        track_rad=1e-12,  # measured 8.9e-16 rad 2 s after a 0.1 rad step
+        rest_height_m=5e-5,  # measured 1.90e-5 m into the ground (the same contacts)
+        rest_speed_m_s=2e-6,  # measured 5.0e-7 m/s
+        change_effect_rad=MappingProxyType(
+            {
+                "mass": 0.03,  # measured 0.083 rad
+                "damping": 0.3,  # measured 0.800 rad, without diverging
+                "friction": 0.3,  # measured 0.906 rad
+                "gain": 0.2,  # measured 0.606 rad
+                "effort": 0.15,  # measured 0.426 rad
+            }
+        ),
     )

@@ -6,6 +6,8 @@ joint's URDF effort limit as the maximum force, solved with up to :data:`SOLVER_
 sweeps. Joint damping comes from the URDF, bounded where a joint is too light for PyBullet's
 explicit damping (:func:`armreach_core.backend.stable_damping`, as the MuJoCo backend does);
 joint friction, set for robustness studies, is a constraint (:mod:`armreach_pybullet.friction`).
+Bullet has no armature (a motor's rotor inertia, on its own joint only), so a physics profile
+with armature is refused here.
 
 The robot's root link is placed at the robot's base pose. Joints the arm does not actuate
 (``robot.held_joints``: fingers...) are reset with the arm and held by the same motor; a
@@ -24,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.backend import NO_OBJECTS, ArmState, Backend, BodyState, Camera, PhysicsConfig, shape_size
-from armreach_core.errors import ArmReachError
+from armreach_core.errors import ArmReachError, ConfigError
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_pybullet.engine import MAX_CLIENTS, engine_output_to_log, pb
 from armreach_pybullet.friction import JointFriction
@@ -257,6 +259,14 @@ class PyBulletBackend(Backend):
 
     def set_effort_limit(self, joint: str, effort: float) -> None:
         self._motors.forces[self._actuator(joint)] = float(effort)  # used from the next set_joint_targets
+
+    def set_joint_armature(self, joint: str, armature: float) -> None:
+        self._actuator(joint)
+        raise ConfigError(
+            f"the PyBullet backend cannot run armature (joints.{joint}): Bullet's multibody has no rotor "
+            "inertia, and adding it to a link's inertia would also load every joint above it; run the profile "
+            "on MuJoCo (backend=mujoco), or fit and keep one without armature (armreach sysid --fit damping,friction)"
+        )
 
     def servo_gain(self, joint: str) -> float:
         return self._motors.kp[self._actuator(joint)] / POSITION_GAIN
