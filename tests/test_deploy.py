@@ -103,6 +103,19 @@ def test_deploy_through_the_sim_driver_writes_a_joint_log(
     assert logged.metadata["kind"] == "deploy"
 
 
+def _deploy(run: Path, log: Path, *options: str, speed: int = 2) -> tuple[int, str]:
+    """``armreach deploy RUN`` through the sim driver on MuJoCo, one step of latency, ``speed`` times real
+    time, 20 targets: (targets reached, what it printed)."""
+    argv = ["deploy", str(run), "--driver", "sim", "--driver-option", "backend=mujoco", "--driver-option", "latency=1"]
+    argv += ["--driver-option", f"speed={speed}", "--targets", "20", "--max-steps", "100", "--joint-log", str(log)]
+    for option in options:
+        argv += ["--driver-option", option]
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(argv) == 0
+    return sum("reached in" in line for line in out.getvalue().splitlines()), out.getvalue()
+
+
 @pytest.mark.slow
 @pytest.mark.skipif("mujoco" not in BACKENDS, reason="MuJoCo is not installed")
 def test_a_fast_policy_from_pybullet_reaches_targets_through_the_sim_driver_on_mujoco(tmp_path: Path) -> None:
@@ -110,22 +123,59 @@ def test_a_fast_policy_from_pybullet_reaches_targets_through_the_sim_driver_on_m
     run = tmp_path / "fast"
     argv = ["train", "--preset", "fast", "--algo", "ppo", "--backend", "pybullet", "--steps", "120000"]
     assert main([*argv, "--out", str(run)]) == 0
-    argv = ["deploy", str(run), "--driver", "sim", "--driver-option", "backend=mujoco", "--driver-option", "latency=1"]
-    argv += [
-        "--driver-option",
-        "speed=2",
-        "--targets",
-        "20",
-        "--max-steps",
-        "100",
-        "--joint-log",
-        str(tmp_path / "j.npz"),
+    reached, said = _deploy(run, tmp_path / "j.npz")
+    assert reached >= 18, said  # 90 % of 20 targets
+
+
+@pytest.mark.slow
+@pytest.mark.skipif("mujoco" not in BACKENDS, reason="MuJoCo is not installed")
+def test_deploy_sysid_retrain_deploy_on_a_perturbed_stand_in(tmp_path: Path) -> None:
+    """The whole path to an arm, against the stand-in running physics the URDF does not know (friction of
+    20 % of each effort, armature on the big joints, one step of latency): a PyBullet policy is deployed,
+    sysid fits the deploy log, a policy retrained on MuJoCo with the fitted profile is deployed again."""
+    import yaml
+
+    from armreach_core.robot.bundled import asset_path
+    from armreach_core.robot.factory import build_robot
+    from armreach_core.robot.spec import ArmSpec
+    from armreach_core.sim2real.profile import load_profile
+
+    robot = build_robot(ArmSpec.create(asset_path("ar6", "ar6.urdf")))
+    joints = {j.name: {"friction": 0.2 * j.effort} for j in robot.joints}
+    for name in robot.joint_names[:3]:
+        joints[name]["armature"] = 0.2
+    truth = tmp_path / "truth.yaml"
+    truth.write_text(
+        yaml.safe_dump({"format": "armreach-physics-profile", "version": 1, "latency": 1, "joints": joints})
+    )
+    run = tmp_path / "fast"
+    argv = ["train", "--preset", "fast", "--algo", "ppo", "--backend", "pybullet", "--steps", "120000"]
+    assert main([*argv, "--out", str(run)]) == 0
+    # in real time: the log's rows are then the stand-in's control steps, as sysid replays them
+    before, said = _deploy(run, tmp_path / "deploy.npz", f"physics={truth}", speed=1)
+    assert before >= 18, said  # 90 %
+    # sysid finds the latency; on a deploy log the motors never saturate, so no damping or friction
+    # shows (docs/sim2real.md), and fitting them costs minutes: the latency alone is fitted here
+    sysid = tmp_path / "sysid"
+    argv = ["sysid", str(tmp_path / "deploy.npz"), "--backend", "mujoco", "--fit", "latency", "--max-latency", "2"]
+    assert main([*argv, "--out", str(sysid)]) == 0
+    fitted = load_profile(sysid / "profile.yaml")
+    assert fitted.latency == 1  # found exactly
+    retrained = tmp_path / "fitted"
+    argv = [
+        "train",
+        "--preset",
+        "fast",
+        "--algo",
+        "ppo",
+        "--backend",
+        "mujoco",
+        "--physics",
+        str(sysid / "profile.yaml"),
     ]
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out):
-        assert main(argv) == 0
-    reached = sum("reached in" in line for line in out.getvalue().splitlines())
-    assert reached >= 18, out.getvalue()  # 90 % of 20 targets
+    assert main([*argv, "--steps", "400000", "--out", str(retrained)]) == 0
+    after, said = _deploy(retrained, tmp_path / "deploy-fitted.npz", f"physics={truth}")
+    assert after >= 19, said  # 95 %
 
 
 def test_shadow_mode_sends_nothing_and_finds_where_the_twin_parts_from_a_held_arm(

@@ -239,6 +239,18 @@ def test_sysid_finds_the_latency_and_brings_the_replay_error_down(world: object,
     assert "| identifiable | rise (rad) | why not |" in (tmp_path / "report.md").read_text()
 
 
+def test_sysid_can_find_the_latency_alone(world: object) -> None:
+    robot = world.robot  # type: ignore[attr-defined]
+    plan = plan_of(robot, robot.joint_names[3:4], Excitation(amplitude=0.5, chirp=1.5, pause=0.25, hold=0.5))
+    log = record(world, plan, latency=2)  # type: ignore[arg-type]
+    result = identify(world, [log], keys=("latency",), max_latency=3)  # type: ignore[arg-type]
+    assert result.profile.latency == 2
+    assert not any(result.profile.joints.values())  # every other value as built
+    assert result.verdicts == {} and result.rms_after < result.rms_before
+    with pytest.raises(ConfigError, match=r"fit a subset of .*, or latency alone"):
+        identify(world, [log], keys=("latency", "damping"))  # type: ignore[arg-type]
+
+
 def test_an_env_runs_a_profiles_dynamics_and_latency(tmp_path: Path) -> None:
     from armreach_core.env import ArmEnv
 

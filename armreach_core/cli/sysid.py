@@ -19,8 +19,8 @@ def add_parser(sub: Any) -> None:
     parser.add_argument(
         "--fit",
         default=None,
-        help="values to fit, of damping,friction,armature,effort (default: damping,friction and armature where "
-        "the backend has it)",
+        help="values to fit, of damping,friction,armature,effort, or latency alone (default: damping,friction and "
+        "armature where the backend has it; the latency is always found)",
     )
     parser.add_argument("--max-latency", type=int, default=3, help="latencies tried, control steps (default: 3)")
     parser.add_argument("--check", nargs="+", type=Path, default=None, metavar="LOG", help="held-out logs to score")

@@ -110,16 +110,25 @@ def _has(backend: Backend, key: str) -> bool:
     return True
 
 
+#: ``--fit latency``: find the latency alone, every other value as built.
+LATENCY_ONLY = "latency"
+
+
 def fittable(backend: Backend, keys: Sequence[str] | None = None) -> tuple[str, ...]:
-    """``keys`` checked against what ``backend`` has; default :data:`DEFAULT_KEYS` less those it has not.
+    """``keys`` checked against what ``backend`` has; default :data:`DEFAULT_KEYS` less those it has not;
+    ``("latency",)``: none (the latency is always found).
 
     ConfigError naming a key sysid does not know or the backend cannot fit.
     """
     if keys is None:
         return tuple(k for k in DEFAULT_KEYS if _has(backend, k))
+    if tuple(keys) == (LATENCY_ONLY,):
+        return ()
     unknown = [k for k in keys if k not in FIT_KEYS]
     if unknown or not keys:
-        raise ConfigError(f"sysid cannot fit {list(keys)}; fit a subset of {', '.join(FIT_KEYS)}")
+        raise ConfigError(
+            f"sysid cannot fit {list(keys)}; fit a subset of {', '.join(FIT_KEYS)}, or {LATENCY_ONLY} alone"
+        )
     missing = [k for k in keys if not _has(backend, k)]
     if missing:
         supported = ", ".join(k for k in FIT_KEYS if _has(backend, k))
@@ -133,7 +142,7 @@ def fittable(backend: Backend, keys: Sequence[str] | None = None) -> tuple[str, 
 def nominal_profile(backend: Backend, keys: Sequence[str] | None = None) -> PhysicsProfile:
     """The backend's values as built from the URDF (``keys``: default every one it has), as a profile (latency 0)."""
     getters = _getters(backend)
-    chosen = [k for k in FIT_KEYS if _has(backend, k)] if keys is None else fittable(backend, keys)
+    chosen = [k for k in FIT_KEYS if _has(backend, k)] if keys is None else (keys and fittable(backend, keys))
     joints = {j: {k: float(getters[k](j)) for k in chosen} for j in backend.robot.joint_names}
     return PhysicsProfile(joints, 0, arm=backend.robot.name, backend=backend.name)
 
@@ -236,7 +245,7 @@ def identify(
         spread: dict[tuple[str, str], float] = {}
         if best is None or latency_rms[lat] < best[0]:  # a fit that only chases noise does not replace it
             best = (latency_rms[lat], current, {})
-        for sweep in range(sweeps):
+        for sweep in range(sweeps if keys else 0):  # latency alone: nothing more to fit
             for joint in robot.joint_names:
                 if not by_joint[joint]:
                     continue
