@@ -29,6 +29,7 @@ reach:
 """
 
 
+@pytest.mark.slow
 def test_a_cloned_run_acts_like_the_reference_and_evaluates(tmp_path: Path) -> None:
     pytest.importorskip("stable_baselines3")
     from stable_baselines3 import SAC
@@ -48,7 +49,7 @@ def test_a_cloned_run_acts_like_the_reference_and_evaluates(tmp_path: Path) -> N
     extractor = model.actor.features_extractor
     assert isinstance(extractor, Standardize) and float(extractor.std.min()) > 0
     assert float(np.abs(extractor.mean.numpy()).max()) > 0  # set from the demonstrations, saved with the model
-    # on states of fresh episodes, the actor's action is near the reference's (random actions are ~0.8 off)
+    # on states of fresh episodes, the actor's action is near the reference's
     env = ArmEnv("reach", max_episode_steps=60)
     reference = env.task.demonstrator(env)
     errors = []
@@ -60,7 +61,7 @@ def test_a_cloned_run_acts_like_the_reference_and_evaluates(tmp_path: Path) -> N
             errors.append(np.abs(model.predict(obs, deterministic=True)[0] - expert).mean())
             obs, *_ = env.step(expert)
     env.close()
-    assert float(np.mean(errors)) < 0.3
+    assert float(np.mean(errors)) < 0.2  # measured 0.10; a zero action is 0.34 off, a random one 0.68
     assert main(["evaluate", str(run_dir), "--episodes", "2", "--max-episode-steps", "60"]) == 0
 
 
