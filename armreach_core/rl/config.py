@@ -130,7 +130,8 @@ class RunConfig:
         _string("urdf", self.urdf, optional=True)
         _string("ee_link", self.ee_link, optional=True)
         _integer("seed", self.seed, 0)
-        _integer("timesteps", self.timesteps, 0 if self.algo == "ik" or "imitation" in dict(self.settings or {}) else 1)
+        imitates = isinstance(self.settings, Mapping) and "imitation" in self.settings
+        _integer("timesteps", self.timesteps, 0 if self.algo == "ik" or imitates else 1)
         _integer("n_envs", self.n_envs, 1, 64)
         _integer("eval_max_episode_steps", self.eval_max_episode_steps, 1)
         if not isinstance(self.settings, Mapping):
