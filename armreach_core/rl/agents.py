@@ -128,6 +128,10 @@ def build_model(
         policy_kwargs["net_arch"] = list(policy["net_arch"])
     if "activation" in policy:
         policy_kwargs["activation_fn"] = activation(learner, policy["activation"])
+    if "imitation" in settings:  # inputs standardized by the demonstrations' statistics (rl.imitation)
+        from armreach_core.rl.standardize import Standardize
+
+        policy_kwargs["features_extractor_class"] = Standardize
     kwargs: dict[str, Any] = {
         "policy_kwargs": policy_kwargs,
         "seed": seed,

@@ -130,7 +130,8 @@ class RunConfig:
         _string("urdf", self.urdf, optional=True)
         _string("ee_link", self.ee_link, optional=True)
         _integer("seed", self.seed, 0)
-        _integer("timesteps", self.timesteps, 0 if self.algo == "ik" else 1)
+        imitates = isinstance(self.settings, Mapping) and "imitation" in self.settings
+        _integer("timesteps", self.timesteps, 0 if self.algo == "ik" or imitates else 1)
         _integer("n_envs", self.n_envs, 1, 64)
         _integer("eval_max_episode_steps", self.eval_max_episode_steps, 1)
         if not isinstance(self.settings, Mapping):
@@ -285,6 +286,8 @@ def resolve_config(
         check_learner(chosen, algo)
         settings["learner"] = chosen
         check_settings(algo, chosen, settings)
+        if "imitation" in settings and chosen != "sb3":  # the cloned actor is a PyTorch module (rl.imitation)
+            raise ConfigError(f"imitation: learner {chosen!r} is not supported; set `learner: sb3` in the preset")
     elif learner is not None:
         raise ConfigError(f"--learner applies to learning algorithms, not {algo!r}")
     envs = int(n_envs if n_envs is not None else settings.get("n_envs", 1))
@@ -304,8 +307,8 @@ def resolve_config(
                 "HER cannot sample before the first episode ends"
             )
     total = int(steps if steps is not None else settings.get("timesteps", 100_000))
-    if total < 1 and algo != "ik":
-        raise ConfigError(f"--steps must be positive, got {total}")
+    if total < 1 and algo != "ik" and "imitation" not in settings:
+        raise ConfigError(f"--steps must be positive, got {total} (0 only with the preset key imitation)")
     total = whole_rollouts(algo, settings, envs, total)
     if eval_max_episode_steps < 1:
         raise ConfigError(f"the evaluation episode limit must be positive, got {eval_max_episode_steps}")

@@ -62,6 +62,7 @@ NOT_ARGUMENTS = (
     "checkpoint_every",
     "learner",
     "until_success",
+    "imitation",
     "vec_env",
 )
 #: Where a learner comes from, for the error that says what to install.

@@ -194,6 +194,14 @@ DEMONSTRATIONS_SCHEMA: dict[str, Check] = {
     "episodes": _num(int, 1),
     "share": _num(float, 0.0, 1.0, lo_open=True),
 }
+IMITATION_SCHEMA: dict[str, Check] = {
+    "episodes": _num(int, 1),
+    "rounds": _num(int, 0),
+    "rollouts": _num(int, 1),
+    "gradient_steps": _num(int, 1),
+    "beta": _num(float, 0.0, 1.0),
+    "noise": _num(float, 0.0),
+}
 HER_SCHEMA: dict[str, Check] = {
     "n_sampled_goal": _num(int, 1),
     "goal_selection_strategy": _choice("future", "final", "episode"),
@@ -246,6 +254,10 @@ for _name in OFF_POLICY:
         "her": _section(HER_SCHEMA),
         # episodes of the task's reference controller, a share of every batch (armreach_core.rl.demonstrations)
         "demonstrations": _section(DEMONSTRATIONS_SCHEMA),
+        # behaviour cloning and DAgger on the task's reference controller first (armreach_core.rl.imitation);
+        # the run's timesteps of reinforcement learning follow (0: none)
+        "imitation": _section(IMITATION_SCHEMA),
+        "timesteps": _num(int, 0),
     }
 
 

@@ -53,6 +53,8 @@ COMMAND = "command.txt"
 ENVIRONMENT = "environment.json"
 #: What the run's demonstration buffer holds (preset key ``demonstrations``): episodes, steps, success rate.
 DEMONSTRATIONS = "demonstrations.json"
+#: What imitation did before reinforcement (preset key ``imitation``): each stage's episodes, states, success.
+IMITATION = "imitation.json"
 MONITOR = "monitor.csv"
 MODEL = "model.zip"
 CHECKPOINT = "checkpoint.zip"

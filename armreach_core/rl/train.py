@@ -114,6 +114,25 @@ def _demonstrate(config: RunConfig, model: Any, run_dir: Path) -> None:
     runs.write_json(run_dir / runs.DEMONSTRATIONS, {"episodes": episodes, "steps": steps, "success_rate": success})
 
 
+def _imitate(config: RunConfig, model: Any, run_dir: Path, stream: TextIO | None) -> None:
+    """Teach the actor the task's reference controller first (preset key ``imitation``) and record how it went."""
+    from armreach_core.env import ArmEnv
+    from armreach_core.rl.agents import env_kwargs
+    from armreach_core.rl.imitation import imitate
+
+    env = ArmEnv(**env_kwargs(config))
+
+    def log(line: str) -> None:
+        if stream is not None:
+            print(line, file=stream, flush=True)
+
+    try:
+        record = imitate(model, env.unwrapped, config.settings["imitation"], config.seed, log)
+    finally:
+        env.close()
+    runs.write_json(run_dir / runs.IMITATION, record)
+
+
 def _until_success(config: RunConfig, run_dir: Path, train_seconds: Any) -> StopOnSuccessCallback | None:
     """The callback that stops training at its first passed held-out evaluation, if the preset asks for one."""
     spec = UntilSuccess.from_settings(config.settings)
@@ -168,6 +187,7 @@ def train(
     call_start = time.perf_counter()
     env = TimedVecEnv(make_vec_env(config, run_dir, seed_base(config.seed), config.n_envs, append=resume))
     rollouts = RolloutTimer()
+    t0 = time.perf_counter()  # training time includes demonstrations and imitation
     try:
         if resume:
             model = _load_checkpoint(config, run_dir, env, trust)
@@ -176,6 +196,8 @@ def train(
             env.seed(seed_base(config.seed))  # SB3 seeded the envs with the run seed itself; spread them
             if "demonstrations" in config.settings:
                 _demonstrate(config, model, run_dir)
+            if "imitation" in config.settings:
+                _imitate(config, model, run_dir, stream)
         # Written once the model exists, so that a folder with a config always has something to resume
         # or is safe to start over (see runs.new_run_dir).
         runs.write_config(run_dir, config)
@@ -184,7 +206,6 @@ def train(
         base_seconds = float(read_progress(run_dir).get("train_seconds", 0.0)) if resume else 0.0
         remaining = config.timesteps - int(model.num_timesteps)
         signals = StopSignals()
-        t0 = time.perf_counter()
 
         def train_seconds() -> float:
             return base_seconds + time.perf_counter() - t0

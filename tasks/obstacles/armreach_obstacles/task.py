@@ -35,7 +35,7 @@ from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.task import Component, Demonstrator, GoalArray, Scene
 from armreach_core.tasks.reach.task import TARGET_MARKER, ReachTask
 from armreach_obstacles.obstacles import SHAPE_ORDER, Obstacle, ObstacleOptions, encode
-from armreach_obstacles.scene import HORIZON, Episode, generate, obstacle_names, place
+from armreach_obstacles.scene import HORIZON, CollisionCheck, Episode, generate, obstacle_names, place
 
 OBSTACLES, CLEARANCE = "obstacles", "link clearances"
 #: Bound on obstacle centres in the observation (m).
@@ -56,6 +56,9 @@ class ReachAroundTask(ReachTask):
         end_on_collision: end the episode at the first touch (default), else go on with the penalty.
         touch_distance: a link this close to an obstacle (m) touches it, default 0.001.
         clearance_margin: the clearance the scene check and the planner keep (m), default 0.02.
+        reference_margin: the reference controller plans each episode's path anew with this clearance
+            (m) where the scene allows (more room for a learner that imitates it); default ``None``,
+            the scene check's path.
         **reach: the reach task's options (:class:`~armreach_core.tasks.reach.task.ReachTask`).
     """
 
@@ -75,6 +78,7 @@ class ReachAroundTask(ReachTask):
         end_on_collision: bool = True,
         touch_distance: float = 0.001,
         clearance_margin: float = 0.02,
+        reference_margin: float | None = None,
         **reach: Any,
     ) -> None:
         count = (obstacle_count, obstacle_count) if isinstance(obstacle_count, int) else tuple(obstacle_count)
@@ -96,6 +100,9 @@ class ReachAroundTask(ReachTask):
         self.end_on_collision = bool(end_on_collision)
         self.touch_distance = float(touch_distance)
         self.clearance_margin = float(clearance_margin)
+        if reference_margin is not None and not (np.isfinite(reference_margin) and reference_margin > 0):
+            raise ConfigError(f"reference_margin={reference_margin!r} must be a positive distance (m) or None")
+        self.reference_margin = None if reference_margin is None else float(reference_margin)
         self.names = obstacle_names(self.slots)
         self.moving_links = tuple(n for n in robot.link_names if n not in robot.fixed_links)
         self._scene: Scene | None = None
@@ -200,7 +207,13 @@ class ReachAroundTask(ReachTask):
         """The planner's reference: follow the episode's collision-free path (:mod:`armreach_obstacles.follow`)."""
         from armreach_obstacles.follow import PathFollower
 
-        return PathFollower(env, self)
+        return PathFollower(env, self, margin=self.reference_margin)
+
+    def collision_check(self) -> CollisionCheck:
+        """The scene check of the episode's obstacles (clear by ``clearance_margin``), for the reference controller."""
+        if self._scene is None:
+            raise RuntimeError("the task has no scene before the env's first reset")
+        return CollisionCheck(self._scene, self.robot, self.names[: len(self.obstacles)], self.clearance_margin)
 
     def park(self, scene: Scene) -> None:
         """Take every obstacle out of the world (tests, demonstrations of the bare reach)."""

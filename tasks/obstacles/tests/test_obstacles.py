@@ -173,16 +173,50 @@ def test_goal_conditioned_form_is_a_dict() -> None:
         assert made.observation_space.contains(obs)
 
 
+@pytest.mark.parametrize("margin", [None, 0.04])
+def test_the_reference_gets_back_to_its_path_when_pushed_off_it(env: Any, margin: float | None) -> None:
+    """Imitation asks the reference about states it did not lead to: pushed off, it still arrives clear."""
+    u = env.unwrapped
+    u.task.reference_margin = margin
+    for seed in range(3):
+        reference = u.task.demonstrator(u)
+        obs, _ = env.reset(seed=seed)
+        push = np.random.default_rng(seed).uniform(-1, 1, u.robot.dof).astype(np.float32)
+        touched, info = 0, {}
+        for t in range(200):
+            action = push if 5 <= t < 13 else reference.act(obs)
+            obs, _, terminated, truncated, info = env.step(action)
+            touched += t >= 13 and info["collision"]
+            if terminated or truncated:
+                break
+        assert info["is_success"] and touched == 0, (seed, margin)
+        assert reference.off_path > 0  # the push took it off the path
+
+
 @pytest.mark.slow
-def test_a_short_training_run_with_planner_demonstrations(tmp_path: Path) -> None:
+@pytest.mark.training
+def test_a_short_imitation_run_of_the_shipped_preset_learns_and_evaluates(tmp_path: Path) -> None:
+    pytest.importorskip("stable_baselines3")
+    import json
+
+    import yaml
+
     from armreach_core.cli import main
     from armreach_core.rl import runs
 
+    shipped = yaml.safe_load((HERE / "armreach_obstacles" / "presets" / "reach-around.yaml").read_text())
+    settings = shipped["reach-around"]["sac"]
+    settings["imitation"].update(episodes=4, rounds=1, rollouts=2, gradient_steps=50)
+    settings["policy"]["net_arch"] = [32, 32]
+    preset = tmp_path / "short.yaml"
+    preset.write_text(yaml.safe_dump(shipped))
     out = tmp_path / "run"
-    argv = ["train", "--task", "reach-around", "--preset", "reach-around", "--steps", "400", "--out", str(out)]
-    assert main(argv) == 0
+    assert main(["train", "--task", "reach-around", "--preset", str(preset), "--out", str(out)]) == 0
+    record = json.loads((out / runs.IMITATION).read_text())
+    assert [s["stage"] for s in record["stages"]] == ["demonstrations", "dagger 1"]
+    assert record["stages"][0]["success_rate"] == 1.0 and record["stages"][0]["touch_rate"] == 0.0
     assert runs.read_config(out).task == "reach-around"
-    assert (out / "model.zip").is_file()
+    assert main(["evaluate", str(out), "--episodes", "2", "--max-episode-steps", "200"]) == 0
 
 
 @pytest.mark.training

@@ -1,0 +1,166 @@
+"""Imitation before reinforcement: behaviour cloning and DAgger on a task's reference controller.
+
+A task with a reference controller (:meth:`armreach_core.task.Task.demonstrator`) can teach
+an off-policy run's actor before (or instead of) any reinforcement learning. The preset key
+``imitation: {episodes: N, rounds: R, rollouts: M, gradient_steps: G, beta: b}``:
+
+1. runs the controller for ``N`` seeded episodes and fits the actor to its actions
+   (behaviour cloning: the mean squared error of the actor's deterministic action); with
+   ``noise: s``, Gaussian noise of spread ``s`` is added to each action taken, and the label
+   stays the controller's clean action, so the data show how to get back to its path
+   (DART: Laskey et al., "DART: Noise Injection for Robust Imitation Learning", 2017);
+2. for each of ``R`` rounds, rolls out ``M`` episodes in which the learner acts (the
+   controller's action is taken instead with probability ``b**round``), asks the
+   controller what it would do in every state the learner visited, adds those labels to
+   the data and fits the actor again (DAgger: Ross, Gordon and Bagnell, "A Reduction of
+   Imitation Learning and Structured Prediction to No-Regret Online Learning", 2011).
+
+Each fit takes ``G`` Adam steps of ``batch_size`` samples, the run's learning rate. The run's
+``timesteps`` of reinforcement learning follow from the cloned actor (0: none). The env
+steps of imitation are reported apart from the run's own (``imitation.json``).
+Implemented for the SB3 learner, whose actors are PyTorch modules.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from armreach_core.errors import ConfigError
+from armreach_core.rl.demonstrations import DEMO_SEED
+
+#: Seeds of the learner's rollouts start here, past any demonstration episode's.
+ROLLOUT_SEED = DEMO_SEED + 500_000
+
+
+class Dataset:
+    """Observations and the controller's actions for them, grown round by round."""
+
+    def __init__(self) -> None:
+        self.observations: list[npt.NDArray[np.float32]] = []
+        self.actions: list[npt.NDArray[np.float32]] = []
+
+    def add(self, observation: Any, action: npt.NDArray[np.float32]) -> None:
+        self.observations.append(np.asarray(observation, dtype=np.float32).ravel())
+        self.actions.append(np.asarray(action, dtype=np.float32))
+
+    def __len__(self) -> int:
+        return len(self.actions)
+
+
+def episode(
+    env: Any,
+    demonstrator: Any,
+    data: Dataset,
+    seed: int,
+    learner: Callable[[Any], npt.NDArray[np.float32]] | None,
+    beta: float,
+    rng: np.random.Generator,
+    noise: float = 0.0,
+) -> dict[str, bool]:
+    """One seeded episode, every state labelled by ``demonstrator``; ``learner`` acts with probability 1 - ``beta``.
+
+    ``noise``: the spread of Gaussian noise added to the action taken (not to the label).
+    """
+    demonstrator.reset()
+    obs, _ = env.reset(seed=seed)
+    touched = False
+    while True:
+        expert = np.asarray(demonstrator.act(obs), dtype=np.float32)
+        data.add(obs, expert)
+        action = expert if learner is None or rng.random() < beta else learner(obs)
+        if noise > 0:
+            action = np.clip(action + rng.normal(0.0, noise, action.shape), -1.0, 1.0).astype(np.float32)
+        obs, _, terminated, truncated, info = env.step(action)
+        touched = touched or bool(info.get("collision"))
+        if terminated or truncated:
+            return {"success": bool(info.get("is_success")), "touched": touched}
+
+
+def fit(model: Any, data: Dataset, steps: int, batch_size: int, learning_rate: float, seed: int) -> float:
+    """Fit ``model``'s actor to ``data`` (``steps`` Adam steps); the mean loss of the last tenth."""
+    import torch as th
+
+    policy = model.policy
+    obs = th.as_tensor(np.stack(data.observations), device=model.device)
+    target = th.as_tensor(np.stack(data.actions), device=model.device)
+    parameters = list(model.actor.parameters())
+    optimizer = th.optim.Adam(parameters, lr=learning_rate)
+    generator = th.Generator().manual_seed(seed)
+    policy.set_training_mode(True)
+    losses = []
+    for _ in range(steps):
+        index = th.randint(len(target), (min(batch_size, len(target)),), generator=generator)
+        predicted = policy._predict(obs[index], deterministic=True)
+        loss = th.nn.functional.mse_loss(predicted, target[index])
+        optimizer.zero_grad()
+        loss.backward()  # type: ignore[no-untyped-call]
+        optimizer.step()
+        losses.append(loss.item())
+    policy.set_training_mode(False)
+    actor_target = getattr(model, "actor_target", None)
+    if actor_target is not None:  # TD3 and DDPG: the target actor starts from the cloned one
+        actor_target.load_state_dict(model.actor.state_dict())
+    tail = losses[-max(1, steps // 10) :]
+    return float(np.mean(tail)) if tail else float("nan")
+
+
+def imitate(
+    model: Any, env: Any, spec: Mapping[str, Any], seed: int, log: Callable[[str], None] | None = None
+) -> dict[str, Any]:
+    """Teach ``model``'s actor ``env``'s reference controller (see the module docstring); what each stage did."""
+    demonstrator = env.task.demonstrator(env)
+    if demonstrator is None:
+        raise ConfigError(
+            f"imitation: task {env.task_name!r} has no reference controller (Task.demonstrator); "
+            "remove the preset's imitation key"
+        )
+    episodes, rounds = int(spec.get("episodes", 100)), int(spec.get("rounds", 4))
+    rollouts, beta = int(spec.get("rollouts", 50)), float(spec.get("beta", 0.5))
+    noise = float(spec.get("noise", 0.0))
+    steps, batch = int(spec.get("gradient_steps", 2000)), int(model.batch_size)
+    rate = float(model.lr_schedule(1.0))
+    rng = np.random.default_rng([seed, 0x1A17])
+    data = Dataset()
+
+    def learner(obs: Any) -> npt.NDArray[np.float32]:
+        action, _ = model.predict(obs, deterministic=True)
+        return np.asarray(action, dtype=np.float32)
+
+    stages: list[dict[str, Any]] = []
+    for stage in range(rounds + 1):
+        t0 = time.perf_counter()
+        first = DEMO_SEED + seed * 10_000 if stage == 0 else ROLLOUT_SEED + seed * 100_000 + (stage - 1) * rollouts
+        count, acting = (episodes, None) if stage == 0 else (rollouts, learner)
+        share = 1.0 if stage == 0 else beta**stage
+        before = len(data)
+        spread = noise if stage == 0 else 0.0
+        outcomes = [episode(env, demonstrator, data, first + i, acting, share, rng, spread) for i in range(count)]
+        if stage == 0:
+            from armreach_core.rl.standardize import standardize_from
+
+            standardize_from(model, np.stack(data.observations))
+        loss = fit(model, data, steps, batch, rate, seed + stage)
+        record = {
+            "stage": "demonstrations" if stage == 0 else f"dagger {stage}",
+            "episodes": count,
+            "expert_share": share,
+            "states": len(data) - before,
+            "dataset": len(data),
+            "success_rate": float(np.mean([o["success"] for o in outcomes])),
+            "touch_rate": float(np.mean([o["touched"] for o in outcomes])),
+            "loss": loss,
+            "seconds": time.perf_counter() - t0,
+        }
+        stages.append(record)
+        if log is not None:
+            log(
+                f"imitation {record['stage']}: {count} episodes (expert share {share:.2f}), "
+                f"success {record['success_rate']:.0%}, touching {record['touch_rate']:.0%}, "
+                f"{len(data)} states, loss {loss:.4f}, {record['seconds']:.0f} s"
+            )
+    return {"stages": stages, "env_steps": len(data)}
