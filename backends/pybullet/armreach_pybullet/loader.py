@@ -23,14 +23,13 @@ GROUND_RGBA = (0.86, 0.87, 0.89, 1.0)
 PYBULLET_MESHES = (".obj", ".stl", ".dae")
 
 #: Drag on the arm's links (PyBullet's ``linearDamping`` and ``angularDamping``) unless
-#: ``PhysicsConfig.engine_drag`` keeps Bullet's default, :data:`ENGINE_DRAG`, which slows every
+#: ``PhysicsConfig.engine_drag`` keeps Bullet's default, 0.04 (a float), which slows every
 #: moving link by ``0.04 (1 + |v|) v`` (and its rotation likewise), a force no URDF states and
 #: MuJoCo does not apply. While the motors hold their targets it is invisible (they are velocity
 #: constraints), but a motor at its effort yields to it: on the KUKA KR16 under the parity's
 #: biased actions the engines parted by 13 mm in free space with it and by 0.02 mm without
 #: (docs/parity.md, "Heavy arms").
 LINK_DRAG = 0.0
-ENGINE_DRAG = 0.04
 
 #: A body's base pose as PyBullet takes it: position, quaternion (x, y, z, w).
 Pose = tuple[list[float], list[float]]
@@ -98,7 +97,6 @@ def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int
 
 
 __all__ = [
-    "ENGINE_DRAG",
     "GROUND_RGBA",
     "LINK_DRAG",
     "PYBULLET_MESHES",
