@@ -48,6 +48,11 @@ EXPECTED = {
     "kuka-kr210": ("tool0", ()),
     "abb-irb140": ("tool0", ()),
     "vega-1u-left": ("L_ee", ()),
+    "kuka-kr6": ("tool0", ()),
+    "pincherx-100": ("/ee_gripper_link", ("gripper", "left_finger", "right_finger")),
+    "widowx-250s": ("/ee_gripper_link", ("gripper", "left_finger", "right_finger")),
+    "lynxmotion-al5d": ("link4", ()),
+    "puma560": ("link7", ()),
 }
 #: Actuated joints: the arm's own, as its maker builds it; TALOS's description starts after its shoulder joint.
 DOF = {
@@ -69,6 +74,11 @@ DOF = {
     "kuka-kr210": 6,
     "abb-irb140": 6,
     "vega-1u-left": 9,
+    "kuka-kr6": 6,
+    "pincherx-100": 4,
+    "widowx-250s": 6,
+    "lynxmotion-al5d": 4,
+    "puma560": 6,
 }
 #: Arms whose held joints are read from the engines: a jaw, mimic fingers, a gripper below a fixed stator.
 HELD = ("so100", "franka-panda", "z1")

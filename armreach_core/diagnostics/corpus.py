@@ -118,6 +118,44 @@ CORPUS: tuple[CorpusArm, ...] = (
         "xacro, STL/DAE meshes",
         (("abb_irb140", "abb_irb140_description"),),
     ),
+    CorpusArm(
+        "kuka-kr6",
+        "rtb-data",
+        "kuka_description/kuka_kr6/urdf/kr6r900sixx.xacro",
+        "xacro, STL/DAE meshes",
+        (("kuka_kr6_support", "kuka_description/kuka_kr6"), ("kuka_resources", "kuka_description/kuka_resources")),
+    ),
+    # Trossen's hobby and research arms: xacro whose links are named "$(arg robot_name)/...",
+    # meshes under package://trossen_descriptions, two tool centres (ee_arm_link, ee_gripper_link)
+    CorpusArm(
+        "pincherx-100",
+        "rtb-data",
+        "trossen_descriptions/urdf/px100.urdf.xacro",
+        "xacro, STL meshes",
+        (("trossen_descriptions", "trossen_descriptions"),),
+    ),
+    CorpusArm(
+        "widowx-250s",
+        "rtb-data",
+        "trossen_descriptions/urdf/wx250s.urdf.xacro",
+        "xacro, STL meshes",
+        (("trossen_descriptions", "trossen_descriptions"),),
+    ),
+    # a 4-joint hobby arm: visual meshes only (no collision geometry), point-mass links
+    CorpusArm(
+        "lynxmotion-al5d",
+        "rtb-data",
+        "lynxmotion_al5d_description/urdf/al5d_robot.urdf",
+        "URDF, STL meshes, no collision geometry",
+        (("lynxmotion_al5d_description", "lynxmotion_al5d_description"),),
+    ),
+    CorpusArm(
+        "puma560",
+        "rtb-data",
+        "unimation_puma560_description/urdf/puma560_robot.urdf.xacro",
+        "xacro, STL meshes",
+        (("unimation_puma560_description", "unimation_puma560_description"),),
+    ),
     # a two-armed upper body with glTF (.glb) visual meshes; its left hand is the arm's end, and
     # armreach's home search finds no pose, so the URDF's zero pose is given
     CorpusArm(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -52,7 +53,7 @@ def markdown(report: RobotReport) -> str:
             f"- end effector: `{report.ee_link}`",
             f"- joints off the chain, held: {', '.join(report.held_joints) or 'none'}",
             *[f"- anatomy: {decision}" for decision in report.anatomy],
-            f"- home: lowest link {report.home_lowest_m:+.3f} m above the ground, dexterity {report.home_dexterity:.3f}"
+            f"- home: {_lowest(report.home_lowest_m)}, dexterity {report.home_dexterity:.3f}"
             f" m/rad, self-collisions: {report.home_self_collisions or 'none'}",
             f"- reach {report.reach_m:.3f} m; targets in a ball of {report.target_radius_m:.2f} m around "
             f"{np.round(report.target_center, 3).tolist()}: {report.target_volume_m3 * 1e3:.1f} litres reachable",
@@ -166,3 +167,9 @@ def save_corpus(reports: Mapping[str, RobotReport], out: Path) -> tuple[str, lis
 
 
 __all__ = ["corpus_table", "markdown", "save_corpus", "save_robot"]
+
+
+def _lowest(lowest_m: float) -> str:
+    if math.isinf(lowest_m):  # nothing to touch the ground with
+        return "no link has collision geometry (nothing can touch the ground)"
+    return f"lowest link {lowest_m:+.3f} m above the ground"

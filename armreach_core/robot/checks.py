@@ -21,12 +21,11 @@ element, the attribute and the fix:
   joint's ``<parent>`` and ``<child>`` name links of the URDF, a ``<mimic>`` names another
   joint of the URDF, and a URDF has at most :data:`MAX_LINKS` links.
 
-A zero mass, and an inertia that is positive semi-definite but singular (a zero principal
-moment: a point or a rod) or breaks the triangle inequality (one moment larger than the
-other two together), are accepted and repaired by the engines: MuJoCo raises masses and
-moments to its lower bounds (``boundmass``, ``boundinertia``) and balances the moments
-(``balanceinertia``); PyBullet takes them as they are. A broken triangle inequality is
-reported (a warning on ``armreach.robot``). The tensor built from the six numbers is
+A zero mass, and an inertia that is positive semi-definite but no rigid body's (more compact
+than a steel ball of the link's mass, a point mass among them, or breaking the triangle
+inequality: one moment larger than the other two together), are accepted; the second kind
+is reported (a warning on ``armreach.robot``) and repaired once, the same way for both
+engines (:mod:`armreach_core.robot.inertia`). The tensor built from the six numbers is
 symmetric; an engine that rotates it and finds it asymmetric by rounding (PyBullet's inverse
 dynamics, on heavy links) is answered by the backend, not refused here.
 
@@ -45,6 +44,7 @@ import numpy as np
 from lxml import etree
 
 from armreach_core.errors import URDFError
+from armreach_core.robot.inertia import repaired
 
 log = logging.getLogger("armreach.robot")
 
@@ -179,7 +179,9 @@ def _check_inertial(inertial: Element) -> None:
     if mass is None or inertia is None:
         missing = "<mass value=...>" if mass is None else "<inertia ixx=... izz=...>"
         raise URDFError(f"{_where(inertial)} has no {missing}; an <inertial> needs both <mass> and <inertia>")
-    _numbers(mass, "value", 1, required=True, minimum=0.0, fix="a mass is never negative: give the link's mass in kg")
+    never_negative = "a mass is never negative: give the link's mass in kg"
+    weight = _numbers(mass, "value", 1, required=True, minimum=0.0, fix=never_negative)
+    assert weight is not None
     values = {}
     for key in _INERTIA:
         number = _numbers(inertia, key, 1, required=True)
@@ -199,13 +201,12 @@ def _check_inertial(inertial: Element) -> None:
             f"{', '.join(f'{e:.3g}' for e in eigenvalues)} kg·m²); a rigid body's moments are >= 0: "
             "fix the signs of the products (ixy, ixz, iyz) or the diagonal"
         )
-    low, mid, high = (float(e) for e in eigenvalues)
-    if high > (low + mid) * (1 + 1e-6) + 1e-12:  # accepted: MuJoCo balances it, PyBullet takes it as it is
+    fix = repaired(weight[0], tensor)
+    if fix is not None:
         log.warning(
-            "<inertia> of %s breaks the triangle inequality (principal moments %.3g, %.3g, %.3g kg·m²: the largest "
-            "exceeds the other two together), which no rigid body does; the engines will not agree on it: fix the "
-            "moments",
-            _where(inertial), low, mid, high,
+            "<inertia> of %s is no rigid body's (%s); both engines get the repaired inertia "
+            "(armreach_core/robot/inertia.py): give the link its real moments",
+            _where(inertial), fix[1],
         )  # fmt: skip
 
 

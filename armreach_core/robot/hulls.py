@@ -27,6 +27,8 @@ from typing import TYPE_CHECKING, Any
 
 from lxml import etree
 
+from armreach_core.robot.inertia import repair_inertials
+
 if TYPE_CHECKING:
     from armreach_core.robot.model import RobotModel
 
@@ -117,9 +119,11 @@ def write_obj(mesh: Any, out: Path) -> Path:
 
 def simulation_urdf(robot: RobotModel, *, visuals: bool) -> bytes:
     """The robot's resolved URDF with collision meshes replaced by their hulls and, unless
-    ``visuals``, without ``<visual>`` elements (an env that never renders needs none).
+    ``visuals``, without ``<visual>`` elements (an env that never renders needs none), and
+    with inertias no rigid body has repaired (:mod:`armreach_core.robot.inertia`).
     :func:`armreach_core.robot.meshes.readable` then converts the meshes an engine cannot read."""
     root = etree.fromstring(robot.parsed.resolved_xml)
+    repair_inertials(root)
     for collision in root.iter("collision"):
         for mesh in collision.iter("mesh"):
             filename = mesh.get("filename", "")
