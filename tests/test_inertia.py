@@ -48,8 +48,9 @@ def test_a_rigid_body_s_inertia_is_left_alone(tensor):
     assert repaired(1.0, tensor) is None
 
 
-def test_a_massless_link_is_left_alone():
-    assert repaired(0.0, np.zeros((3, 3))) is None
+@pytest.mark.parametrize("mass", [0.0, 1e-9])  # so101's gripper_frame_link says 1e-9 kg: a frame
+def test_a_massless_link_is_left_alone(mass):
+    assert repaired(mass, np.zeros((3, 3))) is None
 
 
 def test_the_engines_get_the_repair_and_the_model_keeps_the_urdf_s_numbers(caplog):

@@ -42,7 +42,8 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from armreach_core.rl.evaluate import evaluate_run, format_summary, log_to_tensorboard, save_evaluation
+    from armreach_core.rl.eval_summary import format_summary, log_to_tensorboard
+    from armreach_core.rl.evaluate import evaluate_run, save_evaluation
 
     check_out(args.out)
     evaluation = evaluate_run(
@@ -55,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
         viewer=args.viewer,
         joint_limit_mode=args.joint_limit_mode,
         arm={**robot_kwargs(args), **({"physics": args.physics} if args.physics else {})},
+        count_contacts=not args.viewer,
     )
     if args.viewer:
         successes = sum(1 for episode in evaluation.episodes if episode.success)

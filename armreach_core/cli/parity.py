@@ -39,6 +39,14 @@ def add_parser(sub: Any) -> None:
         "--corpus", action="store_true", help="every installed arm of the corpus: one folder each and one table"
     )
     add_arms_argument(parser)
+    parser.add_argument(
+        "--policy",
+        type=Path,
+        default=None,
+        metavar="RUN",
+        help="compare a trained run's outcomes instead (success and contact steps on each backend, same targets)",
+    )
+    parser.add_argument("--episodes", type=int, default=100, help="with --policy: episodes per backend (default: 100)")
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: runs/parity-<time>)")
     parser.set_defaults(run=run)
 
@@ -51,6 +59,8 @@ def run(args: argparse.Namespace) -> int:
     check_counts(steps=(args.steps, 1), configs=(args.configs, 1))
     check_backends(args.backends)
     check_out(args.out)
+    if args.policy is not None:
+        return _outcomes(args)
     if args.corpus:
         return _corpus(args)
     robot = robot_kwargs(args)
@@ -76,3 +86,28 @@ def _corpus(args: argparse.Namespace) -> int:
     print(table)
     print(f"saved {saved[0]}, {saved[1]} and one folder per arm")
     return 0 if all(not row["failures"] for row in rows.values()) else 1
+
+
+def _outcomes(args: argparse.Namespace) -> int:
+    """A trained run's outcomes on each backend: a table, ``outcomes.md`` and ``outcomes.json``."""
+    from armreach_core.errors import ConfigError
+    from armreach_core.plugins.host import available_backends
+    from armreach_core.rl import runs
+    from armreach_core.rl.outcomes import compare_outcomes, markdown, mismatches, to_json
+
+    if args.corpus or robot_kwargs(args):
+        raise ConfigError("--policy compares a run on its own arm: leave out --corpus, the URDF and the arm flags")
+    check_counts(episodes=(args.episodes, 1))
+    own = runs.read_config(args.policy).backend  # the reference: where the policy was trained
+    backends = list(dict.fromkeys(args.backends or [own, *available_backends(variants=False)]))
+    if len(backends) < 2:
+        raise ConfigError(f"--policy needs two backends to compare, got {', '.join(backends)}")
+    outcomes = compare_outcomes(args.policy, backends, episodes=args.episodes)
+    out: Path = args.out or Path("runs") / time.strftime("parity-policy-%Y%m%d-%H%M%S")
+    out.mkdir(parents=True, exist_ok=True)
+    page = markdown(args.policy, outcomes)
+    (out / "outcomes.md").write_text(page, encoding="utf-8")
+    runs.write_json(out / "outcomes.json", to_json(outcomes))
+    print(page)
+    print(f"saved {out / 'outcomes.md'}, {out / 'outcomes.json'}")
+    return 0 if not mismatches(outcomes) else 1

@@ -155,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
-    from armreach_core.rl.evaluate import table
+    from armreach_core.rl.eval_summary import table
 
     rate = result.timesteps / result.seconds if result.seconds > 0 else float("nan")
     stopped = []

@@ -23,6 +23,7 @@ import numpy.typing as npt
 
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
+from armreach_core.robot.geometry import link_heights
 from armreach_core.robot.ik import IKPolicy
 from armreach_core.robot.model import FloatArray
 from armreach_core.tasks.reach.task import ReachTask
@@ -63,6 +64,8 @@ class Trajectory:
     contact: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))  # (steps,)
     first_contact_links: tuple[str, ...] = ()  # the links touching at the first contact
     contact_known: bool = True  # False: the backend cannot say (no contact queries)
+    #: per moving link, the lowest z (m) of its collision geometry after each step (steps,)
+    heights: dict[str, FloatArray] = field(default_factory=dict)
 
     @property
     def first_contact(self) -> int | None:
@@ -143,6 +146,7 @@ def drive(env: ArmEnv, sequence: str, steps: int, seed: int) -> Trajectory:
         contact=contact,
         first_contact_links=first_links,
         contact_known=known,
+        heights=link_heights(robot, q_log),
     )
 
 

@@ -51,6 +51,9 @@ class Episode:
     collisions: int = 0
     #: Least link-to-obstacle distance over the episode (m); NaN for tasks without obstacles.
     min_clearance: float = float("nan")
+    #: Steps after which a moving link touched anything (the ground, a body, itself); counted
+    #: only when asked (``count_contacts``), else 0.
+    contact_steps: int = 0
 
 
 #: How an episode can end: the goal reached, a joint limit (the paper's rule), the step limit,
@@ -84,6 +87,8 @@ class EvaluationResult:
     source: str = ""
     #: What a joint-limit violation does: ``terminate`` (the paper's rule) or ``clip``.
     joint_limit_mode: str = "terminate"
+    #: Whether each episode's contact steps were counted.
+    contacts_counted: bool = False
 
     def summary(self) -> dict[str, Any]:
         successes = [e.success for e in self.episodes]
@@ -107,6 +112,15 @@ class EvaluationResult:
             "joint_limit_mode": self.joint_limit_mode,
             "ended_by": {end: sum(1 for e in self.episodes if e.ended_by == end) for end in self._endings()},
             **self._collision_summary(),
+            **self._contact_summary(),
+        }
+
+    def _contact_summary(self) -> dict[str, Any]:
+        if not self.contacts_counted:
+            return {}
+        return {
+            "contact_steps": int(sum(e.contact_steps for e in self.episodes)),
+            "contact_episode_rate": float(np.mean([e.contact_steps > 0 for e in self.episodes])),
         }
 
     def _endings(self) -> tuple[str, ...]:
@@ -133,10 +147,13 @@ def run_episodes(
     seed: int = 10_000,
     *,
     on_frame: Callable[[int, ArmEnv], None] | None = None,
+    count_contacts: bool = False,
 ) -> EvaluationResult:
     """Run ``episodes`` seeded episodes of ``agent`` and record them.
 
-    ``make_env`` makes an :class:`ArmEnv`, possibly wrapped (robustness perturbations).
+    ``make_env`` makes an :class:`ArmEnv`, possibly wrapped (robustness perturbations);
+    ``count_contacts`` counts each episode's steps with a moving link touching anything
+    (where the backend answers contact queries).
     """
     if episodes < 1:
         raise ConfigError(f"episodes must be >= 1, got {episodes}")
@@ -153,7 +170,7 @@ def run_episodes(
         for i in range(episodes):
             obs, info = env.reset(seed=seed + i)
             qs = [base.backend.joint_state()[0].copy()]
-            total, violations, steps, collisions = 0.0, 0, 0, 0
+            total, violations, steps, collisions, contacts = 0.0, 0, 0, 0, 0
             clearance = float(info.get("clearance", np.nan))
             if on_frame is not None:
                 on_frame(i, base)
@@ -163,6 +180,8 @@ def run_episodes(
                 total += float(reward)
                 violations += int(info.get("joint_limit_violation", False))
                 collisions += int(info.get("collision", False))
+                if count_contacts:
+                    contacts += bool(base.backend.links_in_contact())
                 clearance = min(clearance, float(info.get("clearance", np.nan)))
                 steps += 1
                 if on_frame is not None:
@@ -186,11 +205,15 @@ def run_episodes(
                     _ending(info, truncated),
                     collisions,
                     clearance,
+                    contacts,
                 )
             )
     finally:
         env.close()
-    return EvaluationResult(base.backend_name, records, dt, _average_trace(traces), time.perf_counter() - t0)
+    seconds = time.perf_counter() - t0
+    result = EvaluationResult(base.backend_name, records, dt, _average_trace(traces), seconds)
+    result.contacts_counted = count_contacts
+    return result
 
 
 def _average_trace(traces: list[npt.NDArray[np.float64]]) -> npt.NDArray[np.float64]:
@@ -252,6 +275,7 @@ def evaluate_run(
     viewer: bool = False,
     joint_limit_mode: str = "terminate",
     arm: Mapping[str, Any] | None = None,
+    count_contacts: bool = False,
 ) -> EvaluationResult:
     """Evaluate a run folder on the paper's task (2048-step limit), optionally on another backend.
 
@@ -261,7 +285,7 @@ def evaluate_run(
     episode at a violation (the paper's rule, the default). ``arm`` overrides the run's
     arm (``urdf``, ``ee_link``, ``home``, ``base_position``, ``base_orientation``): the same
     policy on another start pose, base placement or arm, as long as its observation and
-    action spaces stay the policy's.
+    action spaces stay the policy's. ``count_contacts``: as in :func:`run_episodes`.
     """
     if joint_limit_mode not in JOINT_LIMIT_MODES:
         raise ConfigError(f"--joint-limit-mode must be one of {', '.join(JOINT_LIMIT_MODES)}, got {joint_limit_mode!r}")
@@ -278,7 +302,7 @@ def evaluate_run(
         _check_spaces(agent, kwargs)
     if viewer:
         kwargs["render_mode"] = "human"
-    evaluation = run_episodes(lambda: ArmEnv(**kwargs), agent, episodes, seed)
+    evaluation = run_episodes(lambda: ArmEnv(**kwargs), agent, episodes, seed, count_contacts=count_contacts)
     evaluation.source = agent.describe() if isinstance(agent, (SB3Agent, IKAgent)) else ""
     evaluation.joint_limit_mode = joint_limit_mode
     return evaluation
@@ -313,67 +337,3 @@ def save_evaluation(evaluation: EvaluationResult, out: Path) -> dict[str, Any]:
         times = np.arange(evaluation.jerk_trace.size) * evaluation.control_dt
         np.savetxt(tmp, np.column_stack([times, evaluation.jerk_trace]), delimiter=",", header="time_s,jerk_rad_s3")
     return summary
-
-
-def format_summary(summary: dict[str, Any]) -> str:
-    """One screen: a table of the evaluation's figures, and how the episodes ended."""
-    sr = summary["success_rate"]
-
-    def spread(mean: float, std: float, digits: int) -> str:
-        return "n/a" if sr == 0 else f"{mean:.{digits}f} ± {std:.{digits}f}"
-
-    ended = summary.get("ended_by") or {}
-    rows = [
-        ("controller", str(summary.get("controller") or "")),
-        ("backend", str(summary["backend"])),
-        ("episodes", str(summary["episodes"])),
-        ("joint limits", "end the episode" if summary.get("joint_limit_mode", "terminate") == "terminate" else "clip"),
-        ("success", f"{100 * sr:.0f} %"),
-        ("ended by", ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in ended.items()) or "n/a"),
-        ("steps to goal", spread(summary["steps_to_goal_mean"], summary["steps_to_goal_std"], 1)),
-        ("final reward", f"{summary['final_reward_mean']:.2f} ± {summary['final_reward_std']:.2f}"),
-        ("final distance", f"{100 * summary['final_distance_mean']:.1f} cm"),
-        ("jerk", spread(summary["jerk_mean"], summary["jerk_std"], 2) + " rad/s³"),
-        ("wall time", f"{summary['seconds']:.1f} s"),
-    ]
-    if "collision_episode_rate" in summary:
-        rows[-1:-1] = [
-            ("episodes with a collision", f"{100 * summary['collision_episode_rate']:.0f} %"),
-            ("collisions per episode", f"{summary['collisions_per_episode']:.2f}"),
-            (
-                "least clearance",
-                f"{100 * summary['min_clearance_min']:.1f} cm (episode mean {100 * summary['min_clearance_mean']:.1f})",
-            ),
-        ]
-    return table(rows)
-
-
-def table(rows: list[tuple[str, str]]) -> str:
-    """A two-column box table for the terminal."""
-    left = max(len(k) for k, _ in rows)
-    right = max(len(v) for _, v in rows)
-    lines = [f"┌─{'─' * left}─┬─{'─' * right}─┐"]
-    lines += [f"│ {k:<{left}} │ {v:<{right}} │" for k, v in rows]
-    lines.append(f"└─{'─' * left}─┴─{'─' * right}─┘")
-    return "\n".join(lines)
-
-
-def log_to_tensorboard(run_dir: Path, summary: dict[str, Any]) -> Path | None:
-    """Write the evaluation as SB3's ``EvalCallback`` names it (``eval/success_rate``, ``eval/mean_reward``)
-    into the run's TensorBoard folder, at the run's step count.
-
-    Returns the folder written, or ``None`` for a run without TensorBoard logs (``ik``).
-    """
-    if not (run_dir / "tb").is_dir():
-        return None
-    from stable_baselines3.common.logger import configure
-
-    from armreach_core.rl.checkpoints import read_progress
-
-    folder = run_dir / "tb" / f"eval-{summary['backend']}"
-    logger = configure(str(folder), ["tensorboard"])
-    logger.record("eval/success_rate", float(summary["success_rate"]))
-    logger.record("eval/mean_reward", float(summary["final_reward_mean"]))
-    logger.dump(step=int(read_progress(run_dir).get("timesteps", 0)))
-    logger.close()
-    return folder

@@ -125,6 +125,21 @@ def ground_violations(robot: ArmKinematics, q: npt.ArrayLike, clearance: float =
     return low
 
 
+def link_heights(robot: ArmKinematics, q: npt.ArrayLike) -> dict[str, FloatArray]:
+    """Per moving link with collision geometry, the lowest z (m) of that geometry at each
+    configuration of ``q`` (..., dof)."""
+    geometry = _geometry(robot)
+    frames = robot.link_transforms(q)
+    heights: dict[str, FloatArray] = {}
+    for link, points in geometry.points.items():
+        if link in geometry.grounded:
+            continue
+        transform = frames[link]
+        z = np.einsum("...j,kj->...k", transform[..., 2, :3], points) + transform[..., 2, 3][..., None]
+        heights[link] = z.min(axis=-1)
+    return heights
+
+
 def lowest_points(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:
     """Per configuration of ``q`` (..., dof), the lowest z (m) of the moving links' collision geometry."""
     return _lowest(_geometry(robot), robot.link_transforms(q))

@@ -27,6 +27,8 @@ import numpy as np
 
 #: Density (kg/m³) of the most compact material arms are built of: steel.
 DENSEST = 7850.0
+#: Links lighter than this (kg, a milligram) are frames, not bodies: their inertia is left alone.
+MASSLESS = 1e-6
 _KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 
 
@@ -39,7 +41,7 @@ def ball_moment(mass: float) -> float:
 def repaired(mass: float, tensor: np.ndarray[Any, Any]) -> tuple[np.ndarray[Any, Any], str] | None:
     """The tensor an engine should get for a link of ``mass`` whose inertia is ``tensor``,
     and why, or ``None`` when it is a rigid body's already."""
-    if mass <= 0.0:
+    if mass < MASSLESS:
         return None
     moments = np.linalg.eigvalsh(tensor)
     floor = ball_moment(mass)

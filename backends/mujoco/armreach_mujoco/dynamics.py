@@ -111,7 +111,15 @@ def write_friction(model: Any, compiled: CompiledModel, robot: RobotModel, joint
 
 def effort(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str) -> float:
     motor = compiled.motors[actuated(robot, joint)]
-    return float(model.actuator_forcerange[motor, 1] if compiled.native else model.tendon_frictionloss[motor])
+    if compiled.native:
+        return float(model.actuator_forcerange[motor, 1])
+    limit = float(model.tendon_frictionloss[motor])
+    return 0.0 if limit <= LEAST_EFFORT else limit
+
+
+#: The least effort (N·m or N) a motor row keeps: MuJoCo drops a friction row whose limit is 0,
+#: and the motor writes one reference per row, so an effort of 0 (a motor given way) becomes this.
+LEAST_EFFORT = 1e-12
 
 
 def write_effort(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str, effort: float) -> None:
@@ -119,7 +127,7 @@ def write_effort(model: Any, compiled: CompiledModel, robot: RobotModel, joint: 
     if compiled.native:
         model.actuator_forcerange[motor] = (-effort, effort)
     else:
-        model.tendon_frictionloss[motor] = effort
+        model.tendon_frictionloss[motor] = max(effort, LEAST_EFFORT)
 
 
 def gain(model: Any, compiled: CompiledModel, robot: RobotModel, joint: str) -> float:
