@@ -123,3 +123,18 @@ def test_parity_policy_evaluates_a_run_on_both_engines_and_counts_contacts(train
 def test_parity_policy_refuses_arm_flags(tmp_path, capsys):
     assert main(["parity", "--policy", str(tmp_path), "--corpus", "--out", str(tmp_path / "o")]) == 2
     assert "--policy compares a run on its own arm" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+@pytest.mark.training
+@needs_both
+def test_a_trained_policy_succeeds_and_touches_alike_on_both_engines(tmp_path):
+    """``fast`` PPO on ar6, trained on PyBullet until it succeeds, on 100 targets per engine.
+    Measured: 99 % and 99 % success, 207 and 190 contact steps (one episode pushes into the ground)."""
+    pytest.importorskip("stable_baselines3")
+    run = tmp_path / "run"
+    assert main(["train", "--preset", "fast", "--seed", "0", "--out", str(run)]) == 0
+    out = tmp_path / "outcomes"
+    assert main(["parity", "--policy", str(run), "--episodes", "100", "--out", str(out)]) == 0
+    outcomes = {o["backend"]: o for o in json.loads((out / "outcomes.json").read_text())["outcomes"]}
+    assert outcomes["pybullet"]["success_rate"] >= 0.95 and outcomes["mujoco"]["success_rate"] >= 0.95

@@ -27,7 +27,10 @@ from tests.conftest import BACKENDS
 
 #: Arms whose meshes make their tests take 2-7 s on a 2-core machine (measured with a cold
 #: mesh cache; the others take under 2 s each, about 13 s together).
-SLOW = {"kinova-jaco", "z1", "so101", "panda", "ur10", "kuka-kr16", "kuka-kr210", "abb-irb140", "vega-1u-left"}
+SLOW = {
+    "kinova-jaco", "z1", "so101", "panda", "ur10", "kuka-kr16", "kuka-kr210", "abb-irb140", "vega-1u-left", "kuka-kr6",
+    "widowx-250s", "puma560",
+}  # fmt: skip
 #: What the rules of armreach_core.robot.anatomy give: (end effector, gripper joints).
 EXPECTED = {
     "ur3": ("tool0", ()),

@@ -23,7 +23,9 @@ PHASES = ("free", "contact")
 #: How many steps apart the engines' first contacts may be.
 CONTACT_STEP_SLACK = 2
 #: How near the ground (m), beyond the arms' own distance, a link that touched on one engine must
-#: come on the other: the collision hulls are simplified by up to this much (HULL_TOLERANCE).
+#: come on the other: Bullet's convex shapes carry a collision margin of this size (PyBullet's
+#: closest-point distance is 1.0 mm below MuJoCo's on every link of TALOS, docs/parity.md), and
+#: the collision hulls are simplified by up to as much (HULL_TOLERANCE).
 NEAR_MISS_M = 1e-3
 #: Fewest steps a free-space phase needs for its jerk to be compared: a third difference over
 #: fewer is a handful of numbers.
