@@ -27,6 +27,9 @@ GRAVITY = np.array([0.0, 0.0, -9.81])
 HOLD_MARGIN = 0.8
 #: Seeded poses over which a joint without an effort limit is sized (:func:`sized_efforts`).
 SIZING_POSES = 2048
+#: The mass (kg) both engines give a link without ``<inertial>``: PyBullet's URDF reader loads it
+#: as 1 kg and 1 kg·m² about every axis, and the MuJoCo backend copies that for parity.
+BARE_LINK_MASS = 1.0
 
 
 @dataclass(frozen=True)
@@ -38,8 +41,11 @@ class MassModel:
 
 
 @functools.lru_cache(maxsize=32)
-def mass_model(robot: ArmKinematics) -> MassModel:
-    """The (cached) lumped masses of ``robot``'s arm (off-chain joints where the robot holds them)."""
+def mass_model(robot: ArmKinematics, bare_link_mass: float = 0.0) -> MassModel:
+    """The (cached) lumped masses of ``robot``'s arm (off-chain joints where the robot holds them).
+
+    A link without ``<inertial>`` weighs ``bare_link_mass`` at its origin: nothing, as the URDF
+    says, or :data:`BARE_LINK_MASS`, as the engines load it."""
     n = robot.arm_dof
     reference = robot.clip(np.zeros(robot.dof))
     links = robot.link_transforms(reference)
@@ -48,11 +54,11 @@ def mass_model(robot: ArmKinematics) -> MassModel:
     moments = np.zeros((n, 3))
     for link in robot.link_names:
         inertial = robot.parsed.model.link_map[link].inertial
-        mass = 0.0 if inertial is None or inertial.mass is None else float(inertial.mass)
+        mass = bare_link_mass if inertial is None else 0.0 if inertial.mass is None else float(inertial.mass)
         index = robot.chain_index_of(link)
         if index is None or not (np.isfinite(mass) and mass > 0):
             continue
-        origin = np.eye(4) if inertial.origin is None else np.asarray(inertial.origin, dtype=np.float64)
+        origin = np.eye(4) if inertial is None or inertial.origin is None else np.asarray(inertial.origin, float)
         masses[index] += mass
         moments[index] += mass * (np.linalg.inv(children[index]) @ links[link] @ origin)[:3, 3]
     centers = moments / np.maximum(masses, 1e-300)[:, None]
@@ -75,13 +81,14 @@ def gravity_torques(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:
     return np.stack(torques, axis=-1)
 
 
-def carried_torques(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:
+def carried_torques(robot: ArmKinematics, q: npt.ArrayLike, bare_link_mass: float = 0.0) -> FloatArray:
     """The largest torque (N·m; N for prismatic joints) gravity can put on each arm joint at ``q``,
     whatever way the arm is mounted, shape (..., arm_dof): ``|g| |axis x S|`` with ``S`` the first
     moment of the mass the joint carries about its axis (a prismatic joint: ``|g|`` times that mass).
     For a joint whose axis is horizontal it is :func:`gravity_torques`'s largest over a turn of the base.
+    ``bare_link_mass``: as in :func:`mass_model`.
     """
-    model = mass_model(robot)
+    model = mass_model(robot, bare_link_mass)
     frames, children = robot.chain_frames(q)
     centers = [child[..., :3, :3] @ model.centers[k] + child[..., :3, 3] for k, child in enumerate(children)]
     g = float(np.linalg.norm(GRAVITY))
@@ -105,12 +112,14 @@ def sized_efforts(robot: ArmKinematics) -> tuple[JointSpec, ...]:
     :data:`~armreach_core.robot.joints.DEFAULT_EFFORT_LIMIT`. A single default cannot fit every arm:
     100 N·m would hold a KUKA KR210's shoulder in none of its poses. A vertical base joint is
     sized as if its axis were horizontal: the motor that moves the same load. Tool joints keep
-    the default.
+    the default. The load is what the engines simulate: a link without ``<inertial>`` weighs
+    :data:`BARE_LINK_MASS` (Vega's lift carries six bare frames, 6 kg more than its inertials say,
+    and a motor sized without them left it on its lower limit).
     """
     if all(joint.effort_given for joint in robot.joints[: robot.arm_dof]):
         return robot.joints
     poses = robot.sample_configurations(np.random.default_rng(0), SIZING_POSES)
-    needed = carried_torques(robot, poses).max(axis=0) / HOLD_MARGIN
+    needed = carried_torques(robot, poses, BARE_LINK_MASS).max(axis=0) / HOLD_MARGIN
     return tuple(
         joint
         if joint.effort_given or i >= robot.arm_dof
@@ -167,7 +176,7 @@ def joint_inertias(robot: ArmKinematics, q: npt.ArrayLike, names: Sequence[str])
             stack += below.get(link, [])
             inertial = robot.parsed.model.link_map[link].inertial
             if inertial is None:
-                mass, tensor, origin = 1.0, np.eye(3), np.eye(4)
+                mass, tensor, origin = BARE_LINK_MASS, np.eye(3) * BARE_LINK_MASS, np.eye(4)
             else:
                 mass = 0.0 if inertial.mass is None else float(inertial.mass)
                 tensor = np.zeros((3, 3)) if inertial.inertia is None else np.asarray(inertial.inertia, float)

@@ -19,6 +19,7 @@ from armreach_core.errors import URDFError
 from armreach_core.robot.hulls import simulation_urdf
 from armreach_core.robot.meshes import readable
 from armreach_core.robot.model import RobotModel
+from armreach_core.robot.statics import BARE_LINK_MASS
 from armreach_mujoco.engine import mujoco
 
 #: Mesh formats MuJoCo reads itself; others are converted to .obj with trimesh.
@@ -84,8 +85,8 @@ def spec_from_urdf(robot: RobotModel, visuals: bool = True) -> Any:
         body = spec.body(link)
         if body is not None:
             body.explicitinertial = True
-            body.mass = 1.0
-            body.inertia = [1.0, 1.0, 1.0]
+            body.mass = BARE_LINK_MASS
+            body.inertia = [BARE_LINK_MASS] * 3
             body.ipos = [0.0, 0.0, 0.0]
             body.iquat = [1.0, 0.0, 0.0, 0.0]
     place_base(spec, robot)
