@@ -18,6 +18,7 @@ from armreach_core.diagnostics.corpus import corpus_arm
 from armreach_core.env import ArmEnv
 from armreach_core.robot.bundled import asset_path
 from armreach_core.robot.factory import build_robot
+from armreach_core.robot.geometry import misplaced_geometry
 from armreach_core.robot.joints import DEFAULT_EFFORT_LIMIT
 from armreach_core.robot.model import RobotModel
 from armreach_core.robot.statics import (
@@ -120,6 +121,18 @@ def test_sized_motors_carry_the_links_without_inertials_as_the_engines_load_them
     lift = robot.joints[0]
     assert lift.type == "prismatic" and not lift.effort_given
     assert lift.effort == pytest.approx(with_frames[0]) and with_frames[0] > 1.25 * without[0]
+
+
+def test_collision_meshes_that_miss_the_joints_are_named() -> None:
+    """rtb-data's IRB140 xacro has joint offsets of 2.2 m in all (an IRB 2400's) and meshes reaching
+    3.2-3.5 m from their links' frames: the engines collide with those, so the arm is told."""
+    robot = _robot("abb-irb140")
+    far, span = misplaced_geometry(robot)
+    assert set(far) == {"link_2", "link_3", "link_4", "link_5", "link_6"} and span == pytest.approx(2.2, abs=0.01)
+    assert any("collision geometry off the kinematics" in note for note in robot.anatomy)
+    ar6 = RobotModel(asset_path("ar6", "ar6.urdf"))
+    assert misplaced_geometry(ar6)[0] == {}
+    assert not any("off the kinematics" in note for note in ar6.anatomy)
 
 
 def test_an_arm_without_inertials_keeps_the_default_effort() -> None:

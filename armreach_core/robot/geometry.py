@@ -110,6 +110,24 @@ def _geometry(robot: ArmKinematics) -> _Geometry:
     return _Geometry(points, grounded, frozenset(pairs))
 
 
+def misplaced_geometry(robot: ArmKinematics) -> tuple[dict[str, float], float]:
+    """Links whose collision geometry reaches farther from the link's own frame than the whole
+    robot's joints span (the sum of every joint's offset in the URDF): link -> that distance (m),
+    and that span (m).
+
+    No part of a robot lies farther from a link than that, so such geometry is in another unit
+    or frame than the kinematics (meshes exported in other units, or placed where the whole
+    robot stands instead of in the link's frame); the engines would collide with it as given.
+    """
+    span = sum(float(np.linalg.norm(joint.origin[:3, 3])) for joint in robot.tree_joints)
+    far = {}
+    for link, points in _geometry(robot).points.items():
+        reach = float(np.linalg.norm(points, axis=1).max())
+        if reach > span + 0.05:  # a link's own size beyond its last joint (a flange, a tool): a few cm
+            far[link] = reach
+    return far, span
+
+
 def ground_violations(robot: ArmKinematics, q: npt.ArrayLike, clearance: float = 0.0) -> dict[str, float]:
     """Moving links whose collision geometry dips below ``clearance`` (m) at ``q``: link -> lowest z."""
     geometry = _geometry(robot)

@@ -93,11 +93,27 @@ class RobotModel(ArmKinematics):
         placed, q = place(self, home, base_given=base_position is not None)
         if placed != position:  # the base was raised: the same arm, placed higher
             self._build(parsed, ee_link, tool_joints, placed, orientation)
+        self._report_misplaced_geometry()
         q = q.copy()
         q.flags.writeable = False
         #: The home pose (rad or m per joint, read-only).
         self.home: FloatArray = q
         self._sealed = True
+
+    def _report_misplaced_geometry(self) -> None:
+        from armreach_core.robot.geometry import misplaced_geometry
+
+        far, span = misplaced_geometry(self)
+        if far:
+            links = ", ".join(f"{link!r} {distance:.2f} m" for link, distance in far.items())
+            note = (
+                f"collision geometry off the kinematics: {links} from its own frame, beyond the {span:.2f} m that "
+                f"all the joints of {self.name!r} span; its meshes are in another unit or frame than its joints "
+                "(check each <mesh scale=...> and where the mesh was exported), and the engines collide with them as "
+                "given"
+            )
+            log.warning("%s", note)
+            self.anatomy = (*self.anatomy, note)
 
     def _build(
         self,
