@@ -282,3 +282,7 @@ def test_a_sweep_arm_and_a_run_folder_carry_the_description(arm, tmp_path):
     expanded = (folder / runs.ARM_URDF).read_bytes()
     assert expanded == build_robot(sweep_arm.spec).parsed.resolved_xml
     assert b"xacro" not in expanded.split(b"?>", 1)[1]
+    from armreach_core.rl.evaluate import evaluate_run
+
+    # evaluation builds the arm again from the record, packages and arguments included
+    assert len(evaluate_run(folder, episodes=1, max_episode_steps=5).episodes) == 1

@@ -20,6 +20,7 @@ from armreach_core.errors import ConfigError
 from armreach_core.rl.config import RunConfig
 from armreach_core.rl.learners import LEGACY_LEARNER, activation, algo_class, optimizer_kwargs
 from armreach_core.robot.ik import RESTARTS, IKPolicy
+from armreach_core.robot.spec import ARM_KEYS
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
@@ -34,8 +35,9 @@ class Agent(Protocol):
 
 #: Env settings evaluation keeps from training: they define what an action means.
 ACTION_SETTINGS = ("max_joint_step", "substeps")
-#: Where the arm starts and sits: kept by evaluation like the action's meaning.
-PLACEMENT_SETTINGS = ("home", "base_position", "base_orientation")
+#: The arm itself (where it starts and sits, where its ROS packages are, its xacro arguments):
+#: kept by evaluation like the action's meaning.
+PLACEMENT_SETTINGS = tuple(key for key in ARM_KEYS if key not in ("urdf", "ee_link", "robot"))
 
 
 def env_kwargs(config: RunConfig, *, backend: str | None = None, evaluation: bool = False) -> dict[str, Any]:
