@@ -18,9 +18,9 @@ from lxml import etree
 
 from armreach_core.diagnostics.corpus import corpus_arm
 from armreach_core.diagnostics.parity import run_parity
-from armreach_core.robot.factory import build_robot
 from armreach_core.robot.hulls import simulation_urdf
 from armreach_core.robot.inertia import DENSEST, ball_moment, repaired
+from armreach_core.robot.model import RobotModel
 from tests.conftest import BACKENDS
 
 
@@ -58,7 +58,7 @@ def test_the_engines_get_the_repair_and_the_model_keeps_the_urdf_s_numbers(caplo
     if arm.path is None:
         pytest.skip(f"lynxmotion-al5d is not installed: {arm.install}")
     with caplog.at_level(logging.WARNING, logger="armreach.robot"):
-        robot = build_robot(arm.spec())
+        robot = RobotModel(arm.path, **arm.options())  # not build_robot's cached model: the file is read here
     sent = etree.fromstring(simulation_urdf(robot, visuals=False))
     given = etree.fromstring(robot.parsed.resolved_xml)
     for name in ("link1", "link4"):
