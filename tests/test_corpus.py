@@ -193,15 +193,63 @@ def _pybullet_joints(world: Any) -> dict[str, int]:
     }
 
 
-def _held_state(world: Any, names: list[str]) -> np.ndarray:
-    """Positions of joints the backend does not report (held joints), read from the engine."""
+def _held_state(world: Any, robot: Any) -> np.ndarray:
+    """Positions of joints the backend does not report (held joints), read from the engine.
+
+    PyBullet welds a held joint that follows no actuated joint where it is held: its
+    position is read from the pose of its child link relative to its parent's, which is
+    where the joint puts it.
+    """
+    names = [j.name for j in robot.held_joints]
     if world.name == "pybullet":
         import pybullet as pb
 
+        body, cid = world.body, world.client
         index = _pybullet_joints(world)
-        return np.array([pb.getJointState(world.body, index[n], physicsClientId=world.client)[0] for n in names])
+        out = []
+        for joint in robot.held_joints:
+            info = pb.getJointInfo(body, index[joint.name], physicsClientId=cid)
+            if info[2] != pb.JOINT_FIXED:
+                out.append(pb.getJointState(body, index[joint.name], physicsClientId=cid)[0])
+            else:
+                out.append(_welded_position(world, robot, joint.name, info[16]))
+        return np.array(out)
     model, data = world.model, world.data
     return np.array([data.qpos[model.jnt_qposadr[model.joint(n).id]] for n in names])
+
+
+def _welded_position(world: Any, robot: Any, name: str, parent: int) -> float:
+    """The position of welded joint ``name``: its child's frame seen from its parent's, against
+    the URDF's forward kinematics with the joint at 0 and moved along its axis."""
+    import pybullet as pb
+
+    body, cid = world.body, world.client
+    joint = robot.parsed.model.joint_map[name]
+
+    def frame(link: int) -> np.ndarray:
+        if link < 0:  # the root link's frame: its centre of mass's, less the inertial offset
+            com = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
+            inertial = pb.getDynamicsInfo(body, -1, physicsClientId=cid)[3:5]
+            position, orientation = pb.multiplyTransforms(*com, *pb.invertTransform(*inertial))
+        else:
+            position, orientation = pb.getLinkState(body, link, computeForwardKinematics=True, physicsClientId=cid)[4:6]
+        out = np.eye(4)
+        out[:3, :3] = np.array(pb.getMatrixFromQuaternion(orientation)).reshape(3, 3)
+        out[:3, 3] = position
+        return out
+
+    child = _pybullet_joints(world)[name]
+    relative = np.linalg.inv(frame(parent)) @ frame(child)  # origin @ motion along the axis
+    motion = np.linalg.inv(joint.origin if joint.origin is not None else np.eye(4)) @ relative
+    axis = np.asarray(joint.axis, dtype=float) / np.linalg.norm(joint.axis)
+    if joint.type == "prismatic":
+        return float(motion[:3, 3] @ axis)
+    rotation = motion[:3, :3]
+    return math.atan2(float(axis @ _vee(rotation - rotation.T)) / 2.0, (float(np.trace(rotation)) - 1.0) / 2.0)
+
+
+def _vee(skew: np.ndarray) -> np.ndarray:
+    return np.array([skew[2, 1], skew[0, 2], skew[1, 0]])
 
 
 def _disturb(world: Any, names: list[str], value: float) -> None:
@@ -210,7 +258,8 @@ def _disturb(world: Any, names: list[str], value: float) -> None:
 
         index = _pybullet_joints(world)
         for n in names:
-            pb.resetJointState(world.body, index[n], value, 0.3, physicsClientId=world.client)
+            if pb.getJointInfo(world.body, index[n], physicsClientId=world.client)[2] != pb.JOINT_FIXED:
+                pb.resetJointState(world.body, index[n], value, 0.3, physicsClientId=world.client)
         return
     model, data = world.model, world.data
     for n in names:
@@ -233,12 +282,12 @@ def test_held_joints_are_reset_and_held(arm: CorpusArm, backend: str) -> None:
         _disturb(world, names, 0.02)
         world.step()
         world.reset_joints(robot.home)
-        np.testing.assert_array_equal(_held_state(world, names), robot.held_positions(robot.home))
+        np.testing.assert_allclose(_held_state(world, robot), robot.held_positions(robot.home), atol=1e-6)
         rng = np.random.default_rng(0)
         for _ in range(20):
             world.set_joint_targets(robot.clip(world.joint_state()[0] + rng.uniform(-0.05, 0.05, robot.dof)))
             world.step()
-        np.testing.assert_allclose(_held_state(world, names), robot.held_positions(robot.home), atol=2e-3)
+        np.testing.assert_allclose(_held_state(world, robot), robot.held_positions(robot.home), atol=2e-3)
     finally:
         world.close()
 

@@ -18,6 +18,12 @@ def add_parser(sub: Any) -> None:
     )
     parser.add_argument("--steps", type=int, default=5000, help="timed steps per measurement (default: 5000)")
     parser.add_argument("--repeats", type=int, default=5, help="repeats, taken in turns; the best is kept (default: 5)")
+    parser.add_argument(
+        "--episode-steps",
+        type=int,
+        default=None,
+        help="steps per episode of random actions from home (default: 100, the fast and any-arm presets' episodes)",
+    )
     parser.add_argument("--no-vector", action="store_true", help="skip the vectorized measurements")
     parser.add_argument(
         "--sb3",
@@ -54,6 +60,8 @@ def run(args: argparse.Namespace) -> int:
         return run_learning(args)
     if args.steps < 10 or args.repeats < 1:
         raise ConfigError("--steps must be >= 10 and --repeats >= 1")
+    if args.episode_steps is not None and args.episode_steps < 1:
+        raise ConfigError(f"--episode-steps must be >= 1, got {args.episode_steps}")
     backends = args.backends or installed_backends()
     check_backends(backends)  # at least one
     check_installed(backends)  # and each one's engine imports
@@ -86,7 +94,8 @@ def run(args: argparse.Namespace) -> int:
         sb3_steps=sb3,
         sb3=measure_sb3,
         learners=learners,
-        env_kwargs=robot_kwargs(args),
+        env_kwargs=robot_kwargs(args)
+        | ({} if args.episode_steps is None else {"max_episode_steps": args.episode_steps}),
     )
     print(to_markdown(results))
     if args.out is not None:

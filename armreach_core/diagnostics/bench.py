@@ -30,6 +30,14 @@ from armreach_core.robot.model import FloatArray
 #: Targets the numbers are held to.
 TARGETS = {"step_over_bare": 1.25, "step_over_engine": 1.25, "reset_ms": 1.0, "create_ms": 50.0}
 
+#: Steps per episode of the step benchmarks (random actions from home, then a reset): the
+#: training episodes of the ``fast`` and ``any-arm`` presets. An episode of the task's own
+#: 2,048-step cap is a random walk into the joint limits and onto the ground on some arms
+#: (2,000 steps: a KUKA KR210 link touched the ground in 97 % of them and a target was clipped
+#: at a limit in 96 %; ar6 5 % and 0 %; docs/benchmarks.md), which no training run does: the
+#: ``paper`` preset ends an episode at the first joint limit.
+EPISODE_STEPS = 100
+
 
 #: How the table names each learner.
 LEARNER_NAMES = {"sb3": "SB3 (PyTorch)", "sbx": "SBX (JAX)"}
@@ -192,15 +200,18 @@ def run_bench(
 ) -> list[BackendBench]:
     """Measure every backend.
 
-    ``sb3_steps`` maps algorithm → timed training steps, measured for each of ``learners``
+    The step benchmarks run episodes of :data:`EPISODE_STEPS` steps unless ``env_kwargs``
+    gives ``max_episode_steps``. ``sb3_steps`` maps algorithm → timed training steps, measured for each of ``learners``
     by ``sb3(backend, algo, steps, learner)`` (:func:`armreach_core.rl.throughput.bench_training`);
     skipped when either is None.
     """
+    # episodes of EPISODE_STEPS unless the caller sets their length
+    env_kwargs = {"max_episode_steps": EPISODE_STEPS, **dict(env_kwargs or {})}
     results = []
     for name in backends:
         load_backend_class(name)  # a clear error now if the engine is missing
         result = BackendBench(name)
-        env = ArmEnv(backend=name, **dict(env_kwargs or {}))
+        env = ArmEnv(backend=name, **env_kwargs)
         try:
             gc.collect()
             # Bare loop and env step take turns, so that a burst of other load hits both alike.

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from armreach_core.diagnostics.bench import EPISODE_STEPS
 from armreach_core.diagnostics.corpus import CorpusArm, for_each_corpus_arm
 from armreach_core.diagnostics.picture import robot_picture
 from armreach_core.env import ArmEnv
@@ -217,9 +218,9 @@ def _engine(backend: str, env_kwargs: Mapping[str, Any], steps: int, ik_episodes
         rng = np.random.default_rng(seed)
         actions = rng.uniform(-1, 1, (steps, env.task.action_size())).astype(np.float32)
         t0 = time.perf_counter()
-        for action in actions:
+        for i, action in enumerate(actions, 1):  # the bench's episodes, resets timed
             _, _, terminated, truncated, _ = env.step(action)
-            if terminated or truncated:
+            if terminated or truncated or i % EPISODE_STEPS == 0:
                 env.reset()
         facts.steps_per_s = steps / (time.perf_counter() - t0)
         facts.deterministic = _deterministic(env, seed)

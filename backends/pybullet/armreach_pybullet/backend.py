@@ -10,9 +10,10 @@ Bullet has no armature (a motor's rotor inertia, on its own joint only), so a ph
 with armature is refused here.
 
 The robot's root link is placed at the robot's base pose. Joints the arm does not actuate
-(``robot.held_joints``: fingers...) are reset with the arm and held by the same motor; a
-mimic joint whose master is actuated gets its master's position, times the multiplier plus
-the offset, as its target before every physics step. A reset thus leaves nothing of earlier
+(``robot.held_joints``: fingers...) are welded where they are held
+(:mod:`armreach_pybullet.weld`), except a mimic joint whose master is actuated: it is reset
+with the arm and held by the same motor, with its master's position, times the multiplier
+plus the offset, as its target before every physics step. A reset thus leaves nothing of earlier
 episodes in the robot's state (Bullet does not warm-start a multibody's contacts: measured,
 an arm reset while lying on the ground steps identically whatever came before).
 """
@@ -70,7 +71,7 @@ class PyBulletBackend(Backend):
         layout = read_layout(cid, self._body, robot)
         self._link_index = layout.link_index
         self._joints = layout.joints
-        self._held = layout.held
+        self._held, self._held_slots = layout.held, layout.held_slots
         self._actuated = {name: i for i, name in enumerate(robot.joint_names)}
         # URDF dampings, as loaded (PyBullet does not report a changed one back)
         self._damping = {j.name: float(j.damping) for j in robot.joints}
@@ -127,7 +128,7 @@ class PyBulletBackend(Backend):
             pb.resetJointState(body, joint, float(value), 0.0, physicsClientId=cid)
         self._friction.reset()
         if self._held:
-            held = self.robot.held_positions(values)
+            held = self.robot.held_positions(values)[self._held_slots]
             for joint, value in zip(self._held, held, strict=True):
                 pb.resetJointState(body, joint, float(value), 0.0, physicsClientId=cid)
             self._motors.hold(held)

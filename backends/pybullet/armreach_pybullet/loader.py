@@ -11,6 +11,7 @@ from armreach_core.robot.hulls import simulation_urdf
 from armreach_core.robot.meshes import readable
 from armreach_core.robot.model import RobotModel
 from armreach_pybullet.engine import engine_output_to_log, pb
+from armreach_pybullet.weld import weld, welded_joints
 
 #: Sweeps of Bullet's projected Gauss-Seidel solver per physics step (PyBullet's default is 50).
 #: Bullet stops once the solution stops changing, so an arm in free space usually needs far
@@ -59,6 +60,9 @@ def build_world(cid: int, physics: PhysicsConfig) -> None:
 def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int, Pose]:
     """Load ``robot`` into client ``cid`` at its base pose, with a fixed base: its body id and that pose.
 
+    Held joints that follow no actuated joint are welded at their hold positions
+    (:mod:`armreach_pybullet.weld`).
+
     Raises:
         URDFError: PyBullet refused the URDF (the client is then disconnected).
     """
@@ -72,7 +76,8 @@ def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int
     with tempfile.TemporaryDirectory(prefix="armreach-") as tmp:
         path = os.path.join(tmp, "robot.urdf")
         with open(path, "wb") as handle:
-            handle.write(readable(simulation_urdf(robot, visuals=physics.visuals), PYBULLET_MESHES))
+            urdf = weld(simulation_urdf(robot, visuals=physics.visuals), welded_joints(robot))
+            handle.write(readable(urdf, PYBULLET_MESHES))
         try:
             with engine_output_to_log():
                 body = pb.loadURDF(

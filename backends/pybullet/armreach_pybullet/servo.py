@@ -3,8 +3,9 @@
 Position control is PyBullet's own motor (``POSITION_CONTROL``) with ``positionGain``
 :data:`POSITION_GAIN`, ``velocityGain`` :data:`VELOCITY_GAIN` and each joint's URDF effort
 limit as the maximum force. Joints the arm does not actuate (``robot.held_joints``) are
-held by the same motor; a mimic joint whose master is actuated gets its master's position,
-times the multiplier plus the offset, as its target before every physics step.
+welded where they are held (:mod:`armreach_pybullet.weld`), except a mimic joint whose
+master is actuated: it is held by the same motor, its master's position, times the
+multiplier plus the offset, as its target before every physics step.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from armreach_core.errors import ArmReachError
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.robot.statics import joint_inertias
 from armreach_pybullet.engine import engine_output_to_log, pb
+from armreach_pybullet.weld import welded_joints
 
 log = logging.getLogger("armreach.pybullet")
 
@@ -34,13 +36,15 @@ class Layout:
         joint_index: joint index by URDF joint name, every joint of the body.
         link_index: link index by URDF link name (-1: the root link).
         joints: the actuated joints, in ``robot.joint_names`` order.
-        held: the held joints, in ``robot.held_joints`` order.
+        held: the held joints that still move (not welded), in ``robot.held_joints`` order.
+        held_slots: the place of each of ``held`` in ``robot.held_joints``.
     """
 
     joint_index: dict[str, int]
     link_index: dict[str, int]
     joints: list[int]
     held: list[int]
+    held_slots: list[int]
 
 
 def read_layout(cid: int, body: int, robot: RobotModel) -> Layout:
@@ -59,11 +63,14 @@ def read_layout(cid: int, body: int, robot: RobotModel) -> Layout:
     missing = [name for name in (*robot.joint_names, *(j.name for j in held)) if name not in joint_index]
     if missing:
         raise ArmReachError(f"PyBullet did not create joints {missing} of {robot.urdf_path}")
+    welded = welded_joints(robot)
+    slots = [i for i, j in enumerate(held) if j.name not in welded]
     return Layout(
         joint_index=joint_index,
         link_index=link_index,
         joints=[joint_index[name] for name in robot.joint_names],
-        held=[joint_index[j.name] for j in held],
+        held=[joint_index[held[i].name] for i in slots],
+        held_slots=slots,
     )
 
 
@@ -79,7 +86,8 @@ class Motors:
         self.kd = [VELOCITY_GAIN] * robot.dof
         held = robot.held_joints
         self.held = layout.held
-        self.held_forces = [j.effort for j in held]
+        self.held_slots = layout.held_slots
+        self.held_forces = [held[i].effort for i in layout.held_slots]
         actuated = {name: i for i, name in enumerate(robot.joint_names)}
         # mimic joints of actuated masters: (joint, master, multiplier, offset)
         followers = [
@@ -92,8 +100,10 @@ class Motors:
         self._follower_forces = [self.held_forces[self.held.index(index)] for index in self.followers]
 
     def hold(self, positions: FloatArray) -> None:
-        """Aim the held joints' motors at ``positions`` (one per held joint)."""
+        """Aim the motors of the held joints that move at ``positions`` (one per joint of ``held``)."""
         n = len(self.held)
+        if not n:
+            return
         pb.setJointMotorControlArray(
             self._body,
             self.held,

@@ -1,0 +1,151 @@
+"""Held joints that never give way, welded where they are held before PyBullet loads the arm.
+
+A held joint that follows no actuated joint (a gripper's fingers, a jaw, and mimic joints of
+those) is aimed at one position for the whole episode. Held by a position motor, it is still
+a degree of freedom of Bullet's multibody and a row of its iterative solver: Trossen's
+WidowX 250 s, whose gripper adds three such joints to six, stepped at 0.6 times the speed
+it steps with them welded (docs/benchmarks.md, "Detailed and heavy arms"). Welded, the joint
+is a fixed joint whose origin is the held pose, so its links sit exactly where the motor held
+them and the arm carries the same masses.
+
+A weld never gives way, and a motor does once its load passes its effort limit: a second
+arm held beside the one that moves, or a weak gripper joint (TALOS's, 1 N·m) pressed on the
+ground, moves under such loads on both engines. So only a joint whose effort limit is at
+least :data:`WELD_MARGIN` times the most torque gravity can put on what it carries (the
+masses below it, at their distances from it, however the arm is turned) is welded, and only
+when every held joint above it is welded too; the others keep their motor, as do mimic
+joints of actuated joints. On the corpus that welds every gripper's joints but TALOS's, and
+none of the Vega's second arm and head (welding its wrist alone moved the first arm's end
+8-18 mm from MuJoCo's in free space).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from lxml import etree
+
+from armreach_core.robot.model import FloatArray, RobotModel
+
+#: How many times the gravity load of what it carries a held joint's effort limit must be for
+#: the joint to be welded (gravity at 1 g; the rest of the margin covers the arm's accelerations).
+WELD_MARGIN = 20.0
+GRAVITY = 9.81
+
+
+def welded_joints(robot: RobotModel) -> dict[str, float]:
+    """The held joints welded in PyBullet, by name, with where each is held: those that follow
+    no actuated joint and whose motors hold what they carry with :data:`WELD_MARGIN` to spare."""
+    actuated = set(robot.joint_names)
+    loads = _gravity_loads(robot, [j.name for j in robot.held_joints])
+    strong = {
+        joint.name
+        for joint in robot.held_joints
+        if (joint.mimic is None or joint.mimic.joint not in actuated)
+        and joint.effort >= WELD_MARGIN * loads[joint.name]
+    }
+    # a part welded onto a motor-held part would change how that part gives way: weld a joint
+    # only if every held joint between it and the root is welded too
+    model = robot.parsed.model
+    above = {str(j.child): j for j in model.robot.joints}
+    held = {j.name for j in robot.held_joints}
+
+    def hangs_from_a_motor(name: str) -> bool:
+        link = str(model.joint_map[name].parent)
+        while link in above:
+            joint = above[link]
+            if joint.name in held and joint.name not in strong:
+                return True
+            link = str(joint.parent)
+        return False
+
+    return {j.name: j.position for j in robot.held_joints if j.name in strong and not hangs_from_a_motor(j.name)}
+
+
+def _gravity_loads(robot: RobotModel, names: list[str]) -> dict[str, float]:
+    """The most torque (N·m; N for a prismatic joint) gravity can put on each joint in ``names``:
+    ``g`` times the sum of each carried mass times its centre's distance from the joint (the
+    carried mass for a prismatic joint), with the arm at home."""
+    model = robot.parsed.model
+    frames = robot.link_transforms(robot.home)
+    below: dict[str, list[str]] = {}
+    for joint in model.robot.joints:
+        below.setdefault(str(joint.parent), []).append(str(joint.child))
+    loads = {}
+    for name in names:
+        joint = model.joint_map[name]
+        origin = frames[str(joint.child)][:3, 3]
+        load, stack = 0.0, [str(joint.child)]
+        while stack:
+            link = stack.pop()
+            stack.extend(below.get(link, []))
+            inertial = model.link_map[link].inertial
+            if inertial is None or inertial.mass is None:
+                continue
+            offset = inertial.origin[:3, 3] if inertial.origin is not None else np.zeros(3)
+            centre = frames[link][:3, :3] @ offset + frames[link][:3, 3]
+            lever = 1.0 if joint.type == "prismatic" else float(np.linalg.norm(centre - origin))
+            load += GRAVITY * float(inertial.mass) * lever
+        loads[name] = load
+    return loads
+
+
+def weld(urdf: bytes, joints: dict[str, float]) -> bytes:
+    """``urdf`` with each joint named in ``joints`` made fixed at its given position."""
+    if not joints:
+        return urdf
+    root = etree.fromstring(urdf)
+    for joint in root.iter("joint"):
+        name = joint.get("name")
+        if name not in joints:
+            continue
+        origin = joint.find("origin")
+        if origin is None:
+            origin = etree.SubElement(joint, "origin")
+        xyz = _numbers(origin.get("xyz"))
+        rotation = _rpy_matrix(_numbers(origin.get("rpy")))
+        axis_element = joint.find("axis")
+        axis = _numbers(axis_element.get("xyz") if axis_element is not None else "1 0 0")
+        norm = float(np.linalg.norm(axis))
+        axis = axis / norm if norm > 0 else np.array([1.0, 0.0, 0.0])
+        value = joints[name]
+        if joint.get("type") == "prismatic":
+            xyz = xyz + rotation @ (axis * value)
+        else:  # revolute or continuous
+            rotation = rotation @ _axis_rotation(axis, value)
+        origin.set("xyz", " ".join(repr(float(v)) for v in xyz))
+        origin.set("rpy", " ".join(repr(float(v)) for v in _matrix_rpy(rotation)))
+        joint.set("type", "fixed")
+        for tag in ("axis", "limit", "mimic", "dynamics", "calibration", "safety_controller"):
+            for element in joint.findall(tag):
+                joint.remove(element)
+    return bytes(etree.tostring(root))
+
+
+def _numbers(text: str | None) -> FloatArray:
+    return np.array([float(v) for v in (text or "0 0 0").split()], dtype=np.float64)
+
+
+def _axis_rotation(axis: FloatArray, angle: float) -> FloatArray:
+    x, y, z = axis
+    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]], dtype=np.float64)
+    out: FloatArray = np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+    return out
+
+
+def _rpy_matrix(rpy: FloatArray) -> FloatArray:
+    """URDF's fixed-axis roll, pitch, yaw: ``Rz(yaw) Ry(pitch) Rx(roll)``."""
+    roll, pitch, yaw = rpy
+    x, y, z = np.eye(3)
+    return _axis_rotation(z, yaw) @ _axis_rotation(y, pitch) @ _axis_rotation(x, roll)
+
+
+def _matrix_rpy(rotation: FloatArray) -> tuple[float, float, float]:
+    pitch = math.asin(max(-1.0, min(1.0, -float(rotation[2, 0]))))
+    if abs(float(rotation[2, 0])) < 1.0 - 1e-9:
+        return math.atan2(rotation[2, 1], rotation[2, 2]), pitch, math.atan2(rotation[1, 0], rotation[0, 0])
+    return 0.0, pitch, math.atan2(-rotation[0, 1], rotation[1, 1])  # gimbal lock: the roll folded into yaw
+
+
+__all__ = ["WELD_MARGIN", "weld", "welded_joints"]
