@@ -5,8 +5,9 @@ Each arm is timed as ``armreach bench`` times an env step (random actions in epi
 against ar6 in turns in the same test, so that other load on the machine hits both alike.
 The shares are bounds a little under those measured (docs/benchmarks.md, "Detailed and
 heavy arms"); they fail if a gripper's held joints are simulated as joints again (Trossen's
-WidowX 250 s and PincherX 100, the Panda) or if the benchmark's episodes become random walks
-that leave the KUKA KR210 lying on the ground.
+WidowX 250 s and PincherX 100, the Panda), if the WidowX's placeholder gripper inertias reach
+the engines again (0.31 of ar6 with them, 0.55 without), or if the benchmark's episodes become
+random walks that leave the KUKA KR210 lying on the ground.
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ def _share_of_ar6(arm: dict[str, Any]) -> float:
     ("name", "least"),
     # measured 0.60, 0.31-0.32, 0.48-0.50 and 0.97-0.99 (before: 0.43, 0.20, 0.37, and 0.3 for the
     # KR210 in one 2,000-step random walk), on 2 cores with a load average of 3.5-3.8
-    [("px100", 0.5), ("wx250s", 0.25), ("panda", 0.42), ("kuka-kr210", 0.75)],
+    [("px100", 0.5), ("wx250s", 0.45), ("panda", 0.42), ("kuka-kr210", 0.75)],
 )
 def test_an_arm_keeps_its_share_of_ar6s_pybullet_speed(name: str, least: float) -> None:
     arm = _trossen(name) if name in ("px100", "wx250s") else _corpus(name)

@@ -40,6 +40,14 @@ def test_moments_breaking_the_triangle_inequality_are_balanced_to_their_mean():
     np.testing.assert_allclose(fix[0], np.eye(3) * tensor.trace() / 3)
 
 
+def test_a_placeholder_wider_than_the_robot_gets_the_ball():
+    """Trossen's 1 g gripper frames carry 1e-3 kg·m² about each axis: a radius of gyration of 1 m."""
+    fix = repaired(0.001, np.eye(3) * 1e-3, span=0.78)
+    assert fix is not None and "radius of gyration" in fix[1]
+    np.testing.assert_allclose(fix[0], np.eye(3) * ball_moment(0.001))
+    assert repaired(0.001, np.eye(3) * 1e-3) is None  # without a span to compare with
+
+
 @pytest.mark.parametrize(
     "tensor",
     [np.diag([0.01, 0.02, 0.025]), np.diag([4e-5, 4e-3, 4e-3])],  # a box; a steel rod (0.5 m, 1 kg) about its axis

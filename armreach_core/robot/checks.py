@@ -22,10 +22,10 @@ element, the attribute and the fix:
   joint of the URDF, and a URDF has at most :data:`MAX_LINKS` links.
 
 A zero mass, and an inertia that is positive semi-definite but no rigid body's (more compact
-than a steel ball of the link's mass, a point mass among them, or breaking the triangle
-inequality: one moment larger than the other two together), are accepted; the second kind
-is reported (a warning on ``armreach.robot``) and repaired once, the same way for both
-engines (:mod:`armreach_core.robot.inertia`). The tensor built from the six numbers is
+than a steel ball of the link's mass, a point mass among them, wider than the whole robot, or
+breaking the triangle inequality), are accepted; the second kind is reported (a warning on
+``armreach.robot``) and repaired once, the same way for both engines
+(:mod:`armreach_core.robot.inertia`). The tensor built from the six numbers is
 symmetric; an engine that rotates it and finds it asymmetric by rounding (PyBullet's inverse
 dynamics, on heavy links) is answered by the backend, not refused here.
 
@@ -44,7 +44,7 @@ import numpy as np
 from lxml import etree
 
 from armreach_core.errors import URDFError
-from armreach_core.robot.inertia import repaired
+from armreach_core.robot.inertia import repairs
 
 log = logging.getLogger("armreach.robot")
 
@@ -180,8 +180,7 @@ def _check_inertial(inertial: Element) -> None:
         missing = "<mass value=...>" if mass is None else "<inertia ixx=... izz=...>"
         raise URDFError(f"{_where(inertial)} has no {missing}; an <inertial> needs both <mass> and <inertia>")
     never_negative = "a mass is never negative: give the link's mass in kg"
-    weight = _numbers(mass, "value", 1, required=True, minimum=0.0, fix=never_negative)
-    assert weight is not None
+    _numbers(mass, "value", 1, required=True, minimum=0.0, fix=never_negative)
     values = {}
     for key in _INERTIA:
         number = _numbers(inertia, key, 1, required=True)
@@ -201,13 +200,6 @@ def _check_inertial(inertial: Element) -> None:
             f"{', '.join(f'{e:.3g}' for e in eigenvalues)} kg·m²); a rigid body's moments are >= 0: "
             "fix the signs of the products (ixy, ixz, iyz) or the diagonal"
         )
-    fix = repaired(weight[0], tensor)
-    if fix is not None:
-        log.warning(
-            "<inertia> of %s is no rigid body's (%s); both engines get the repaired inertia "
-            "(armreach_core/robot/inertia.py): give the link its real moments",
-            _where(inertial), fix[1],
-        )  # fmt: skip
 
 
 def _check_link(link: Element) -> None:
@@ -312,6 +304,12 @@ def check_tree(root: Element) -> None:
         _check_link(link)
     for joint in joints:
         _check_joint(joint)
+    for inertia, _, why in repairs(root):
+        log.warning(
+            "%s is no rigid body's (%s); both engines get the repaired inertia "
+            "(armreach_core/robot/inertia.py): give the link its real moments",
+            _where(inertia), why,
+        )  # fmt: skip
     link_names = {link.get("name") for link in links}
     for joint in joints:
         for end in ("parent", "child"):

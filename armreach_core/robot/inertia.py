@@ -1,21 +1,28 @@
 """Inertias no rigid body has, repaired once, the same way, before either engine sees them.
 
 :mod:`armreach_core.robot.checks` refuses what is no inertia at all (a negative moment, a
-tensor that is not positive semi-definite) and accepts two kinds that real descriptions
-ship but no rigid body has. Left to the engines, each repairs them its own way (MuJoCo
-raises and balances moments, PyBullet takes them as they are), and a joint whose inertia
-depends on them then moves differently on each (a 4-joint hobby arm whose links are
-point masses parted by 0.09-0.43 rad). So the URDF both engines load is repaired here:
+tensor that is not positive semi-definite) and accepts kinds that real descriptions ship
+but no part of a robot has. Left to the engines, each repairs them its own way (MuJoCo
+raises and balances moments, PyBullet takes them as they are), or takes them as given, and
+a joint whose inertia depends on them then moves differently on each (a 4-joint hobby arm
+whose links are point masses parted by 0.09-0.43 rad), or slowly: placeholder inertias on
+a gripper's frames made PyBullet's solver take ten times ar6's sweeps. So the URDF both
+engines load is repaired here:
 
 * **Denser than steel.** A link of mass ``m`` whose moments sum to less than those of a
   solid steel ball of that mass (point masses, zero tensors, a few grams said to weigh
   kilograms) gets the ball's inertia about its centre of mass: nothing an arm is made of
   is more compact, so this is the least inertia the link can have.
+* **Wider than the robot.** A link whose radius of gyration (``sqrt(I / m)`` about its
+  largest principal axis) exceeds the sum of all the robot's joint offsets, so that its mass
+  would lie beyond any part of the robot (Trossen's 1 g frames with 1e-3 kg·m² each: 1 m
+  on a 0.4-0.8 m arm), is a placeholder: it gets the steel ball's inertia too.
 * **Triangle inequality broken** (one principal moment larger than the other two
   together): every moment becomes their mean, as MuJoCo's ``balanceinertia`` does.
 
-Each repair is logged on ``armreach.robot`` with the link and what it became when the URDF
-is checked; the URDF the user gave, and the kinematics and statics read from it, are unchanged.
+:func:`repairs` lists them (the checks log each one on ``armreach.robot`` when the URDF is
+read); :func:`repair_inertials` writes them into the URDF the engines load. The URDF the
+user gave, and the kinematics and statics read from it, are unchanged.
 """
 
 from __future__ import annotations
@@ -30,6 +37,7 @@ DENSEST = 7850.0
 #: Links lighter than this (kg, a milligram) are frames, not bodies: their inertia is left alone.
 MASSLESS = 1e-6
 _KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+_PLACES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
 def ball_moment(mass: float) -> float:
@@ -38,15 +46,24 @@ def ball_moment(mass: float) -> float:
     return float(0.4 * mass * radius * radius)
 
 
-def repaired(mass: float, tensor: np.ndarray[Any, Any]) -> tuple[np.ndarray[Any, Any], str] | None:
-    """The tensor an engine should get for a link of ``mass`` whose inertia is ``tensor``,
-    and why, or ``None`` when it is a rigid body's already."""
+def repaired(
+    mass: float, tensor: np.ndarray[Any, Any], span: float = math.inf
+) -> tuple[np.ndarray[Any, Any], str] | None:
+    """The tensor an engine should get for a link of ``mass`` whose inertia is ``tensor``, on a
+    robot whose joint offsets add up to ``span`` m, and why; ``None`` when it is fine as it is."""
     if mass < MASSLESS:
         return None
     moments = np.linalg.eigvalsh(tensor)
     floor = ball_moment(mass)
     if float(moments.sum()) < 3.0 * floor:
         why = f"more compact than a steel ball of {mass:.4g} kg: given that ball's {floor:.3g} kg·m²"
+        return np.eye(3) * floor, why
+    gyration = math.sqrt(float(moments[-1]) / mass)
+    if gyration > span:
+        why = (
+            f"a radius of gyration of {gyration:.2f} m for {mass:.4g} kg, beyond the {span:.2f} m all the robot's "
+            f"joints span: given a steel ball's {floor:.3g} kg·m²"
+        )
         return np.eye(3) * floor, why
     low, mid, high = (float(m) for m in moments)
     if high > (low + mid) * (1 + 1e-6) + 1e-12:
@@ -55,11 +72,22 @@ def repaired(mass: float, tensor: np.ndarray[Any, Any]) -> tuple[np.ndarray[Any,
     return None
 
 
-def repair_inertials(root: Any) -> int:
-    """Repair, in place, every ``<inertial>`` of the URDF tree ``root`` that no rigid body
-    has (the module docstring says how); the number repaired. The URDF's checks
-    (:mod:`armreach_core.robot.checks`) have logged each one when the file was read."""
-    count = 0
+def joint_span(root: Any) -> float:
+    """The sum of every joint's offset (m) in the URDF tree ``root``: no two points of the robot
+    are farther apart, whatever its pose (its links' own sizes aside)."""
+    total = 0.0
+    for joint in root.iter("joint"):
+        origin = joint.find("origin")
+        if origin is not None and origin.get("xyz"):
+            total += math.dist((0.0, 0.0, 0.0), [float(v) for v in origin.get("xyz").split()])
+    return total
+
+
+def repairs(root: Any) -> list[tuple[Any, np.ndarray[Any, Any], str]]:
+    """Every ``<inertial>`` of the URDF tree ``root`` that needs a repair: (its ``<inertia>``
+    element, the tensor it gets, why), in the order of the links."""
+    span = joint_span(root)
+    found = []
     for link in root.iter("link"):
         inertial = link.find("inertial")
         if inertial is None:
@@ -71,11 +99,17 @@ def repair_inertials(root: Any) -> int:
         tensor = np.array(
             [[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]], [v["ixz"], v["iyz"], v["izz"]]]
         )
-        fix = repaired(float(mass_element.get("value", "0")), tensor)
-        if fix is None:
-            continue
-        new = fix[0]
-        for key, (i, j) in zip(_KEYS, ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)), strict=True):
-            inertia.set(key, repr(float(new[i, j])))
-        count += 1
-    return count
+        fix = repaired(float(mass_element.get("value", "0")), tensor, span)
+        if fix is not None:
+            found.append((inertia, fix[0], fix[1]))
+    return found
+
+
+def repair_inertials(root: Any) -> int:
+    """Repair, in place, every ``<inertial>`` of the URDF tree ``root`` that :func:`repairs`
+    finds; the number repaired."""
+    found = repairs(root)
+    for inertia, tensor, _ in found:
+        for key, (i, j) in zip(_KEYS, _PLACES, strict=True):
+            inertia.set(key, repr(float(tensor[i, j])))
+    return len(found)
