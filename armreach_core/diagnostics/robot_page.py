@@ -27,7 +27,8 @@ def markdown(report: RobotReport) -> str:
             "",
         ]
     elif report.parity:
-        lines += [f"**Usable.** The parity check holds ({', '.join(e.backend for e in report.engines)}).", ""]
+        also = f" Read the {len(report.warnings)} warnings below." if report.warnings else ""
+        lines += [f"**Usable.** The parity check holds ({', '.join(e.backend for e in report.engines)}).{also}", ""]
     else:
         lines += ["**Usable.** (Parity not checked: it needs two engines and --parity-steps above 0.)", ""]
     if report.joints:
@@ -107,7 +108,7 @@ def corpus_table(reports: Mapping[str, RobotReport]) -> str:
             continue
         for f in report.engines:
             head = (
-                [name, f"`{report.ee_link}`", str(len(report.held_joints)), f"{report.home_lowest_m * 100:.1f} cm"]
+                [name, f"`{report.ee_link}`", str(len(report.held_joints)), _clearance_cm(report.home_lowest_m)]
                 if f is report.engines[0]
                 else ["", "", "", ""]
             )
@@ -173,3 +174,7 @@ def _lowest(lowest_m: float) -> str:
     if math.isinf(lowest_m):  # nothing to touch the ground with
         return "no link has collision geometry (nothing can touch the ground)"
     return f"lowest link {lowest_m:+.3f} m above the ground"
+
+
+def _clearance_cm(lowest_m: float) -> str:
+    return "no collision geometry" if math.isinf(lowest_m) else f"{lowest_m * 100:.1f} cm"

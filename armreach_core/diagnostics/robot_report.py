@@ -79,10 +79,14 @@ class RobotReport:
 
     @property
     def verdict(self) -> str:
-        """``usable``, ``NOT usable`` or ``NOT usable: the engines disagree`` (parity alone failed)."""
+        """``usable`` (``usable, with N warnings``), ``NOT usable`` or ``NOT usable: the engines disagree``
+        (parity alone failed)."""
         if self.problems:
             return "NOT usable"
-        return "NOT usable: the engines disagree" if self.parity_failures else "usable"
+        if self.parity_failures:
+            return "NOT usable: the engines disagree"
+        count = len(self.warnings)
+        return f"usable, with {count} warning{'s' if count > 1 else ''}" if count else "usable"
 
     def to_json(self) -> dict[str, Any]:
         out = asdict(self)
@@ -108,6 +112,7 @@ def _robot_facts(report: RobotReport, env: ArmEnv) -> None:
     ]
     report.held_joints = [joint.name for joint in robot.held_joints]
     report.anatomy = list(robot.anatomy)
+    report.warnings += list(getattr(robot, "geometry_warnings", ()))
     report.home = [float(v) for v in robot.home]
     facts = describe(robot, robot.home)
     report.home_lowest_m = facts["lowest_link_m"]

@@ -100,6 +100,9 @@ class RobotModel(ArmKinematics):
         self.home: FloatArray = q
         self._sealed = True
 
+    #: What the description's geometry gets wrong that the engines simulate as given (one sentence each).
+    geometry_warnings: tuple[str, ...] = ()
+
     def _report_misplaced_geometry(self) -> None:
         from armreach_core.robot.geometry import misplaced_geometry
 
@@ -114,6 +117,7 @@ class RobotModel(ArmKinematics):
             )
             log.warning("%s", note)
             self.anatomy = (*self.anatomy, note)
+            self.geometry_warnings = (note,)
 
     def _build(
         self,
