@@ -15,6 +15,10 @@ an off-policy run's actor before (or instead of) any reinforcement learning. The
    the data and fits the actor again (DAgger: Ross, Gordon and Bagnell, "A Reduction of
    Imitation Learning and Structured Prediction to No-Regret Online Learning", 2011).
 
+With ``workers: W`` the episodes of each stage run in ``W`` processes, each with an env of its
+own (:mod:`armreach_core.rl.collection`); every episode draws its noise from a generator keyed by
+its seed, so the data are the same for any ``W``.
+
 Each fit takes ``G`` Adam steps of ``batch_size`` samples, the run's learning rate. The run's
 ``timesteps`` of reinforcement learning follow from the cloned actor (0: none). The env
 steps of imitation are reported apart from the run's own (``imitation.json``).
@@ -28,57 +32,15 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from armreach_core.errors import ConfigError
+from armreach_core.rl.collection import Collector, Dataset, Rollout, episode
 from armreach_core.rl.demonstrations import DEMO_SEED
 
 #: Seeds of the learner's rollouts start here, past any demonstration episode's.
 ROLLOUT_SEED = DEMO_SEED + 500_000
 
-
-class Dataset:
-    """Observations and the controller's actions for them, grown round by round."""
-
-    def __init__(self) -> None:
-        self.observations: list[npt.NDArray[np.float32]] = []
-        self.actions: list[npt.NDArray[np.float32]] = []
-
-    def add(self, observation: Any, action: npt.NDArray[np.float32]) -> None:
-        self.observations.append(np.asarray(observation, dtype=np.float32).ravel())
-        self.actions.append(np.asarray(action, dtype=np.float32))
-
-    def __len__(self) -> int:
-        return len(self.actions)
-
-
-def episode(
-    env: Any,
-    demonstrator: Any,
-    data: Dataset,
-    seed: int,
-    learner: Callable[[Any], npt.NDArray[np.float32]] | None,
-    beta: float,
-    rng: np.random.Generator,
-    noise: float = 0.0,
-) -> dict[str, bool]:
-    """One seeded episode, every state labelled by ``demonstrator``; ``learner`` acts with probability 1 - ``beta``.
-
-    ``noise``: the spread of Gaussian noise added to the action taken (not to the label).
-    """
-    demonstrator.reset()
-    obs, _ = env.reset(seed=seed)
-    touched = False
-    while True:
-        expert = np.asarray(demonstrator.act(obs), dtype=np.float32)
-        data.add(obs, expert)
-        action = expert if learner is None or rng.random() < beta else learner(obs)
-        if noise > 0:
-            action = np.clip(action + rng.normal(0.0, noise, action.shape), -1.0, 1.0).astype(np.float32)
-        obs, _, terminated, truncated, info = env.step(action)
-        touched = touched or bool(info.get("collision"))
-        if terminated or truncated:
-            return {"success": bool(info.get("is_success")), "touched": touched}
+__all__ = ["ROLLOUT_SEED", "Dataset", "episode", "fit", "imitate"]
 
 
 def fit(model: Any, data: Dataset, steps: int, batch_size: int, learning_rate: float, seed: int) -> float:
@@ -110,9 +72,17 @@ def fit(model: Any, data: Dataset, steps: int, batch_size: int, learning_rate: f
 
 
 def imitate(
-    model: Any, env: Any, spec: Mapping[str, Any], seed: int, log: Callable[[str], None] | None = None
+    model: Any,
+    env: Any,
+    spec: Mapping[str, Any],
+    seed: int,
+    log: Callable[[str], None] | None = None,
+    env_kwargs: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Teach ``model``'s actor ``env``'s reference controller (see the module docstring); what each stage did."""
+    """Teach ``model``'s actor ``env``'s reference controller (see the module docstring); what each stage did.
+
+    ``env_kwargs`` build the envs of the worker processes (``workers`` above 1).
+    """
     demonstrator = env.task.demonstrator(env)
     if demonstrator is None:
         raise ConfigError(
@@ -121,46 +91,46 @@ def imitate(
         )
     episodes, rounds = int(spec.get("episodes", 100)), int(spec.get("rounds", 4))
     rollouts, beta = int(spec.get("rollouts", 50)), float(spec.get("beta", 0.5))
-    noise = float(spec.get("noise", 0.0))
+    noise, workers = float(spec.get("noise", 0.0)), int(spec.get("workers", 1))
     steps, batch = int(spec.get("gradient_steps", 2000)), int(model.batch_size)
     rate = float(model.lr_schedule(1.0))
-    rng = np.random.default_rng([seed, 0x1A17])
     data = Dataset()
-
-    def learner(obs: Any) -> npt.NDArray[np.float32]:
-        action, _ = model.predict(obs, deterministic=True)
-        return np.asarray(action, dtype=np.float32)
-
     stages: list[dict[str, Any]] = []
-    for stage in range(rounds + 1):
-        t0 = time.perf_counter()
-        first = DEMO_SEED + seed * 10_000 if stage == 0 else ROLLOUT_SEED + seed * 100_000 + (stage - 1) * rollouts
-        count, acting = (episodes, None) if stage == 0 else (rollouts, learner)
-        share = 1.0 if stage == 0 else beta**stage
-        before = len(data)
-        spread = noise if stage == 0 else 0.0
-        outcomes = [episode(env, demonstrator, data, first + i, acting, share, rng, spread) for i in range(count)]
-        if stage == 0:
-            from armreach_core.rl.standardize import standardize_from
-
-            standardize_from(model, np.stack(data.observations))
-        loss = fit(model, data, steps, batch, rate, seed + stage)
-        record = {
-            "stage": "demonstrations" if stage == 0 else f"dagger {stage}",
-            "episodes": count,
-            "expert_share": share,
-            "states": len(data) - before,
-            "dataset": len(data),
-            "success_rate": float(np.mean([o["success"] for o in outcomes])),
-            "touch_rate": float(np.mean([o["touched"] for o in outcomes])),
-            "loss": loss,
-            "seconds": time.perf_counter() - t0,
-        }
-        stages.append(record)
-        if log is not None:
-            log(
-                f"imitation {record['stage']}: {count} episodes (expert share {share:.2f}), "
-                f"success {record['success_rate']:.0%}, touching {record['touch_rate']:.0%}, "
-                f"{len(data)} states, loss {loss:.4f}, {record['seconds']:.0f} s"
+    with Collector(env, demonstrator, env_kwargs, workers) as collector:
+        for stage in range(rounds + 1):
+            t0 = time.perf_counter()
+            first = DEMO_SEED + seed * 10_000 if stage == 0 else ROLLOUT_SEED + seed * 100_000 + (stage - 1) * rollouts
+            count = episodes if stage == 0 else rollouts
+            share = 1.0 if stage == 0 else beta**stage
+            rollout = Rollout(
+                None if stage == 0 else model.policy, share, noise if stage == 0 else 0.0, (seed, 0x1A17, stage)
             )
-    return {"stages": stages, "env_steps": len(data)}
+            before = len(data)
+            collected = collector.run(range(first, first + count), rollout)
+            data.observations += collected.observations
+            data.actions += collected.actions
+            outcomes = collected.outcomes
+            if stage == 0:
+                from armreach_core.rl.standardize import standardize_from
+
+                standardize_from(model, np.stack(data.observations))
+            loss = fit(model, data, steps, batch, rate, seed + stage)
+            record = {
+                "stage": "demonstrations" if stage == 0 else f"dagger {stage}",
+                "episodes": count,
+                "expert_share": share,
+                "states": len(data) - before,
+                "dataset": len(data),
+                "success_rate": float(np.mean([o["success"] for o in outcomes])),
+                "touch_rate": float(np.mean([o["touched"] for o in outcomes])),
+                "loss": loss,
+                "seconds": time.perf_counter() - t0,
+            }
+            stages.append(record)
+            if log is not None:
+                log(
+                    f"imitation {record['stage']}: {count} episodes (expert share {share:.2f}), "
+                    f"success {record['success_rate']:.0%}, touching {record['touch_rate']:.0%}, "
+                    f"{len(data)} states, loss {loss:.4f}, {record['seconds']:.0f} s"
+                )
+    return {"stages": stages, "env_steps": len(data), "workers": workers}

@@ -120,14 +120,15 @@ def _imitate(config: RunConfig, model: Any, run_dir: Path, stream: TextIO | None
     from armreach_core.rl.agents import env_kwargs
     from armreach_core.rl.imitation import imitate
 
-    env = ArmEnv(**env_kwargs(config))
+    kwargs = env_kwargs(config)
+    env = ArmEnv(**kwargs)
 
     def log(line: str) -> None:
         if stream is not None:
             print(line, file=stream, flush=True)
 
     try:
-        record = imitate(model, env.unwrapped, config.settings["imitation"], config.seed, log)
+        record = imitate(model, env.unwrapped, config.settings["imitation"], config.seed, log, kwargs)
     finally:
         env.close()
     runs.write_json(run_dir / runs.IMITATION, record)

@@ -1,0 +1,187 @@
+"""Imitation's episodes on several cores: one env per worker process, the episodes in seed order.
+
+Running the reference controller dominates an imitation run (planning each episode's path).
+:func:`collect` runs a list of seeded episodes (:func:`armreach_core.rl.imitation.episode`)
+in this process, or split into chunks over ``workers`` spawned processes, each with an env of
+its own built from the same keyword arguments. Every episode draws its action noise and its
+expert-or-learner choices from a generator of its own, keyed by the run and the episode's
+seed, so an episode's states and labels do not depend on which process ran it or what it ran
+before: the merged data are the same for any number of workers.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import io
+import multiprocessing
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+#: Chunks per worker: small enough to keep both cores busy to the end, large enough that sending the
+#: learner's policy with each chunk costs little.
+CHUNKS_PER_WORKER = 8
+
+
+class Dataset:
+    """Observations and the controller's actions for them, grown round by round."""
+
+    def __init__(self) -> None:
+        self.observations: list[npt.NDArray[np.float32]] = []
+        self.actions: list[npt.NDArray[np.float32]] = []
+
+    def add(self, observation: Any, action: npt.NDArray[np.float32]) -> None:
+        self.observations.append(np.asarray(observation, dtype=np.float32).ravel())
+        self.actions.append(np.asarray(action, dtype=np.float32))
+
+    def __len__(self) -> int:
+        return len(self.actions)
+
+
+def episode(
+    env: Any,
+    demonstrator: Any,
+    data: Dataset,
+    seed: int,
+    learner: Callable[[Any], npt.NDArray[np.float32]] | None,
+    beta: float,
+    rng: np.random.Generator,
+    noise: float = 0.0,
+) -> dict[str, bool]:
+    """One seeded episode, every state labelled by ``demonstrator``; ``learner`` acts with probability 1 - ``beta``.
+
+    ``noise``: the spread of Gaussian noise added to the action taken (not to the label).
+    """
+    demonstrator.reset()
+    obs, _ = env.reset(seed=seed)
+    touched = False
+    while True:
+        expert = np.asarray(demonstrator.act(obs), dtype=np.float32)
+        data.add(obs, expert)
+        action = expert if learner is None or rng.random() < beta else learner(obs)
+        if noise > 0:
+            action = np.clip(action + rng.normal(0.0, noise, action.shape), -1.0, 1.0).astype(np.float32)
+        obs, _, terminated, truncated, info = env.step(action)
+        touched = touched or bool(info.get("collision"))
+        if terminated or truncated:
+            return {"success": bool(info.get("is_success")), "touched": touched}
+
+
+@dataclass
+class Collected:
+    """Observations, the controller's labels and each episode's outcome, in seed order."""
+
+    observations: list[npt.NDArray[np.float32]] = field(default_factory=list)
+    actions: list[npt.NDArray[np.float32]] = field(default_factory=list)
+    outcomes: list[dict[str, bool]] = field(default_factory=list)
+
+    def extend(self, other: Collected) -> None:
+        self.observations += other.observations
+        self.actions += other.actions
+        self.outcomes += other.outcomes
+
+
+@dataclass(frozen=True)
+class Rollout:
+    """How the episodes are run: who acts (``policy``: an SB3 policy, or None for the controller alone),
+    with what share of the controller's actions, what action noise, and the key of their generators."""
+
+    policy: Any
+    beta: float
+    noise: float
+    key: tuple[int, ...]
+
+
+def run_seeds(env: Any, demonstrator: Any, seeds: Sequence[int], rollout: Rollout) -> Collected:
+    """The episodes of ``seeds`` in ``env``, one after another (see the module docstring)."""
+    data, outcomes = Dataset(), []
+    learner = None
+    if rollout.policy is not None:
+        policy = rollout.policy
+
+        def learner(obs: Any) -> npt.NDArray[np.float32]:
+            action, _ = policy.predict(obs, deterministic=True)
+            return np.asarray(action, dtype=np.float32)
+
+    for seed in seeds:
+        rng = np.random.default_rng([*rollout.key, seed])
+        outcomes.append(episode(env, demonstrator, data, seed, learner, rollout.beta, rng, rollout.noise))
+    return Collected(data.observations, data.actions, outcomes)
+
+
+# One env and its controller per worker process, built once by its initializer.
+_WORKER: dict[str, Any] = {}
+
+
+def _start_worker(env_kwargs: Mapping[str, Any]) -> None:
+    import torch as th
+
+    from armreach_core.env import ArmEnv
+
+    th.set_num_threads(1)
+    env: Any = ArmEnv(**env_kwargs).unwrapped
+    _WORKER["env"], _WORKER["demonstrator"] = env, env.task.demonstrator(env)
+
+
+def _run_chunk(seeds: list[int], policy: bytes | None, beta: float, noise: float, key: tuple[int, ...]) -> Collected:
+    import torch as th
+
+    learner = None if policy is None else th.load(io.BytesIO(policy), weights_only=False)
+    return run_seeds(_WORKER["env"], _WORKER["demonstrator"], seeds, Rollout(learner, beta, noise, key))
+
+
+class Collector:
+    """Runs :func:`run_seeds` here (``workers`` 1) or over a pool of ``workers`` spawned processes.
+
+    ``env_kwargs`` build each worker's env (:class:`armreach_core.env.ArmEnv`); ``env`` and
+    ``demonstrator`` serve the episodes run in this process. Close it (or use it as a context
+    manager) to stop the workers.
+    """
+
+    def __init__(self, env: Any, demonstrator: Any, env_kwargs: Mapping[str, Any] | None, workers: int = 1) -> None:
+        self.env, self.demonstrator, self.workers = env, demonstrator, workers
+        self._pool: concurrent.futures.ProcessPoolExecutor | None = None
+        if workers > 1:
+            if env_kwargs is None:
+                raise ValueError("collecting on several workers needs the env's keyword arguments")
+            self._pool = concurrent.futures.ProcessPoolExecutor(
+                max_workers=workers,
+                mp_context=multiprocessing.get_context("spawn"),
+                initializer=_start_worker,
+                initargs=(dict(env_kwargs),),
+            )
+
+    def __enter__(self) -> Collector:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)
+            self._pool = None
+
+    def run(self, seeds: Sequence[int], rollout: Rollout) -> Collected:
+        """The episodes of ``seeds``, merged in seed order."""
+        if self._pool is None:
+            return run_seeds(self.env, self.demonstrator, seeds, rollout)
+        import torch as th
+
+        policy: bytes | None = None
+        if rollout.policy is not None:
+            buffer = io.BytesIO()
+            th.save(rollout.policy, buffer)
+            policy = buffer.getvalue()
+        size = max(1, -(-len(seeds) // (self.workers * CHUNKS_PER_WORKER)))
+        chunks = [list(seeds[i : i + size]) for i in range(0, len(seeds), size)]
+        futures = [
+            self._pool.submit(_run_chunk, chunk, policy, rollout.beta, rollout.noise, rollout.key) for chunk in chunks
+        ]
+        merged = Collected()
+        for future in futures:
+            merged.extend(future.result())
+        return merged
