@@ -130,17 +130,8 @@ def misplaced_geometry(robot: ArmKinematics) -> tuple[dict[str, float], float]:
 
 def ground_violations(robot: ArmKinematics, q: npt.ArrayLike, clearance: float = 0.0) -> dict[str, float]:
     """Moving links whose collision geometry dips below ``clearance`` (m) at ``q``: link -> lowest z."""
-    geometry = _geometry(robot)
-    frames = robot.link_transforms(q)
-    low: dict[str, float] = {}
-    for link, points in geometry.points.items():
-        if link in geometry.grounded:
-            continue
-        transform = frames[link]
-        z = float((points @ transform[:3, :3].T + transform[:3, 3])[:, 2].min())
-        if z < clearance:
-            low[link] = z
-    return low
+    heights = link_heights(robot, np.asarray(q, dtype=np.float64))
+    return {link: float(z) for link, z in heights.items() if z < clearance}
 
 
 def link_heights(robot: ArmKinematics, q: npt.ArrayLike) -> dict[str, FloatArray]:
