@@ -116,6 +116,12 @@ def near_miss(toucher: Trajectory, bystander: Trajectory, step: int) -> str | No
     return f"{where} (allowed {allowed * 1e3:.1f} mm)"
 
 
+def _smoother_ratio(a: float, b: float) -> float:
+    """How many times the larger of two mean jerks is the smaller (>= 1; 1 when both are 0)."""
+    low, high = sorted((a, b))
+    return high / low if low > 0 else (1.0 if high == 0 else math.inf)
+
+
 def _rms(values: FloatArray) -> float | None:
     return float(np.sqrt(np.mean(values**2))) if values.size else None
 
@@ -159,9 +165,6 @@ class Gap:
             contact_joint_rms_rad=_rms(dq[split:]),
         )
 
-    def phase_ee_rms_m(self, phase: str) -> float | None:
-        return self.free_ee_rms_m if phase == "free" else self.contact_ee_rms_m
-
 
 @dataclass
 class ParityReport:
@@ -194,9 +197,7 @@ class ParityReport:
 
     def jerk_ratio(self, sequence: str, backend: str) -> float:
         """How many times smoother the smoother of ``backend`` and the reference is (>= 1)."""
-        ours, theirs = self.jerk(sequence, backend), self.jerk(sequence, self.reference)
-        low, high = sorted((ours, theirs))
-        return high / low if low > 0 else (1.0 if high == 0 else math.inf)
+        return _smoother_ratio(self.jerk(sequence, backend), self.jerk(sequence, self.reference))
 
     def steps_per_second(self, backend: str) -> float:
         run = self.trajectories["random"][backend]
@@ -210,8 +211,7 @@ class ParityReport:
         theirs = runs[self.reference].q[:split]
         if len(ours) < FREE_JERK_ROWS:
             return None
-        low, high = sorted((mean_jerk(ours, self.control_dt), mean_jerk(theirs, self.control_dt)))
-        return high / low if low > 0 else (1.0 if high == 0 else math.inf)
+        return _smoother_ratio(mean_jerk(ours, self.control_dt), mean_jerk(theirs, self.control_dt))
 
     def failures(self) -> list[str]:
         """Every measured number outside its tolerance, in words (empty: parity holds).

@@ -211,9 +211,8 @@ def run_episodes(
     finally:
         env.close()
     seconds = time.perf_counter() - t0
-    result = EvaluationResult(base.backend_name, records, dt, _average_trace(traces), seconds)
-    result.contacts_counted = count_contacts
-    return result
+    trace = _average_trace(traces)
+    return EvaluationResult(base.backend_name, records, dt, trace, seconds, contacts_counted=count_contacts)
 
 
 def _average_trace(traces: list[npt.NDArray[np.float64]]) -> npt.NDArray[np.float64]:

@@ -151,21 +151,10 @@ def link_heights(robot: ArmKinematics, q: npt.ArrayLike) -> dict[str, FloatArray
 
 def lowest_points(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:
     """Per configuration of ``q`` (..., dof), the lowest z (m) of the moving links' collision geometry."""
-    return _lowest(_geometry(robot), robot.link_transforms(q))
-
-
-def _lowest(geometry: _Geometry, frames: dict[str, FloatArray]) -> FloatArray:
-    """Per configuration, the lowest point of the moving links' collision geometry (batch,)."""
-    lows: list[FloatArray] = []
-    for link, points in geometry.points.items():
-        if link in geometry.grounded:
-            continue
-        transform = frames[link]
-        z = np.einsum("...j,kj->...k", transform[..., 2, :3], points) + transform[..., 2, 3][..., None]
-        lows.append(z.min(axis=-1))
-    if not lows:
-        return np.full(next(iter(frames.values())).shape[:-2], np.inf)
-    lowest: FloatArray = np.min(np.stack(lows), axis=0)
+    heights = link_heights(robot, q)
+    if not heights:
+        return np.full(np.shape(q)[:-1], np.inf)
+    lowest: FloatArray = np.min(np.stack(list(heights.values())), axis=0)
     return lowest
 
 
