@@ -11,7 +11,7 @@ from armreach_core.robot.hulls import simulation_urdf
 from armreach_core.robot.meshes import readable
 from armreach_core.robot.model import RobotModel
 from armreach_pybullet.engine import engine_output_to_log, pb
-from armreach_pybullet.weld import weld, welded_joints
+from armreach_pybullet.weld import weld
 
 #: Sweeps of Bullet's projected Gauss-Seidel solver per physics step (PyBullet's default is 50).
 #: Bullet stops once the solution stops changing, so an arm in free space usually needs far
@@ -76,7 +76,7 @@ def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int
     with tempfile.TemporaryDirectory(prefix="armreach-") as tmp:
         path = os.path.join(tmp, "robot.urdf")
         with open(path, "wb") as handle:
-            urdf = weld(simulation_urdf(robot, visuals=physics.visuals), welded_joints(robot))
+            urdf = weld(simulation_urdf(robot, visuals=physics.visuals), robot)
             handle.write(readable(urdf, PYBULLET_MESHES))
         try:
             with engine_output_to_log():

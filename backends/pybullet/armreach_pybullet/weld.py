@@ -21,11 +21,15 @@ none of the Vega's second arm and head (welding its wrist alone moved the first 
 
 from __future__ import annotations
 
-import math
+import functools
+from collections.abc import Mapping
+from types import MappingProxyType
 
 import numpy as np
 from lxml import etree
+from trimesh.transformations import euler_from_matrix
 
+from armreach_core.robot.kinematics import joint_motion
 from armreach_core.robot.model import FloatArray, RobotModel
 
 #: How many times the gravity load of what it carries a held joint's effort limit must be for
@@ -34,9 +38,11 @@ WELD_MARGIN = 20.0
 GRAVITY = 9.81
 
 
-def welded_joints(robot: RobotModel) -> dict[str, float]:
+@functools.lru_cache(maxsize=32)
+def welded_joints(robot: RobotModel) -> Mapping[str, float]:
     """The held joints welded in PyBullet, by name, with where each is held: those that follow
-    no actuated joint and whose motors hold what they carry with :data:`WELD_MARGIN` to spare."""
+    no actuated joint and whose motors hold what they carry with :data:`WELD_MARGIN` to spare.
+    Cached per (immutable) robot: loading the arm and laying out its motors both ask."""
     actuated = set(robot.joint_names)
     loads = _gravity_loads(robot, [j.name for j in robot.held_joints])
     strong = {
@@ -60,7 +66,9 @@ def welded_joints(robot: RobotModel) -> dict[str, float]:
             link = str(joint.parent)
         return False
 
-    return {j.name: j.position for j in robot.held_joints if j.name in strong and not hangs_from_a_motor(j.name)}
+    return MappingProxyType(
+        {j.name: j.position for j in robot.held_joints if j.name in strong and not hangs_from_a_motor(j.name)}
+    )
 
 
 def _gravity_loads(robot: RobotModel, names: list[str]) -> dict[str, float]:
@@ -91,61 +99,31 @@ def _gravity_loads(robot: RobotModel, names: list[str]) -> dict[str, float]:
     return loads
 
 
-def weld(urdf: bytes, joints: dict[str, float]) -> bytes:
-    """``urdf`` with each joint named in ``joints`` made fixed at its given position."""
+def weld(urdf: bytes, robot: RobotModel) -> bytes:
+    """``urdf`` (``robot``'s, as the engine loads it) with each of :func:`welded_joints` made a
+    fixed joint whose origin is the joint's frame at its held position."""
+    joints = welded_joints(robot)
     if not joints:
         return urdf
+    frames = {joint.name: joint for joint in robot.tree_joints}
     root = etree.fromstring(urdf)
-    for joint in root.iter("joint"):
-        name = joint.get("name")
+    for joint in root.findall("joint"):  # the robot's joints, not a <transmission>'s
+        name = str(joint.get("name"))
         if name not in joints:
             continue
+        tree = frames[name]
+        held: FloatArray = tree.origin @ joint_motion(tree.kind, tree.axis, np.asarray(joints[name]))
         origin = joint.find("origin")
         if origin is None:
             origin = etree.SubElement(joint, "origin")
-        xyz = _numbers(origin.get("xyz"))
-        rotation = _rpy_matrix(_numbers(origin.get("rpy")))
-        axis_element = joint.find("axis")
-        axis = _numbers(axis_element.get("xyz") if axis_element is not None else "1 0 0")
-        norm = float(np.linalg.norm(axis))
-        axis = axis / norm if norm > 0 else np.array([1.0, 0.0, 0.0])
-        value = joints[name]
-        if joint.get("type") == "prismatic":
-            xyz = xyz + rotation @ (axis * value)
-        else:  # revolute or continuous
-            rotation = rotation @ _axis_rotation(axis, value)
-        origin.set("xyz", " ".join(repr(float(v)) for v in xyz))
-        origin.set("rpy", " ".join(repr(float(v)) for v in _matrix_rpy(rotation)))
+        origin.set("xyz", " ".join(repr(float(v)) for v in held[:3, 3]))
+        rpy = euler_from_matrix(held, "sxyz")  # type: ignore[no-untyped-call]  # URDF's fixed-axis roll, pitch, yaw
+        origin.set("rpy", " ".join(repr(float(v)) for v in rpy))
         joint.set("type", "fixed")
         for tag in ("axis", "limit", "mimic", "dynamics", "calibration", "safety_controller"):
             for element in joint.findall(tag):
                 joint.remove(element)
     return bytes(etree.tostring(root))
-
-
-def _numbers(text: str | None) -> FloatArray:
-    return np.array([float(v) for v in (text or "0 0 0").split()], dtype=np.float64)
-
-
-def _axis_rotation(axis: FloatArray, angle: float) -> FloatArray:
-    x, y, z = axis
-    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]], dtype=np.float64)
-    out: FloatArray = np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
-    return out
-
-
-def _rpy_matrix(rpy: FloatArray) -> FloatArray:
-    """URDF's fixed-axis roll, pitch, yaw: ``Rz(yaw) Ry(pitch) Rx(roll)``."""
-    roll, pitch, yaw = rpy
-    x, y, z = np.eye(3)
-    return _axis_rotation(z, yaw) @ _axis_rotation(y, pitch) @ _axis_rotation(x, roll)
-
-
-def _matrix_rpy(rotation: FloatArray) -> tuple[float, float, float]:
-    pitch = math.asin(max(-1.0, min(1.0, -float(rotation[2, 0]))))
-    if abs(float(rotation[2, 0])) < 1.0 - 1e-9:
-        return math.atan2(rotation[2, 1], rotation[2, 2]), pitch, math.atan2(rotation[1, 0], rotation[0, 0])
-    return 0.0, pitch, math.atan2(-rotation[0, 1], rotation[1, 1])  # gimbal lock: the roll folded into yaw
 
 
 __all__ = ["WELD_MARGIN", "weld", "welded_joints"]
