@@ -29,13 +29,14 @@ import numpy as np
 from lxml import etree
 from trimesh.transformations import euler_from_matrix
 
+from armreach_core.robot.geometry import moving_with
 from armreach_core.robot.kinematics import joint_motion
 from armreach_core.robot.model import FloatArray, RobotModel
+from armreach_core.robot.statics import GRAVITY
 
 #: How many times the gravity load of what it carries a held joint's effort limit must be for
 #: the joint to be welded (gravity at 1 g; the rest of the margin covers the arm's accelerations).
 WELD_MARGIN = 20.0
-GRAVITY = 9.81
 
 
 @functools.lru_cache(maxsize=32)
@@ -77,24 +78,20 @@ def _gravity_loads(robot: RobotModel, names: list[str]) -> dict[str, float]:
     carried mass for a prismatic joint), with the arm at home."""
     model = robot.parsed.model
     frames = robot.link_transforms(robot.home)
-    below: dict[str, list[str]] = {}
-    for joint in model.robot.joints:
-        below.setdefault(str(joint.parent), []).append(str(joint.child))
+    g = float(np.linalg.norm(GRAVITY))
     loads = {}
     for name in names:
         joint = model.joint_map[name]
         origin = frames[str(joint.child)][:3, 3]
-        load, stack = 0.0, [str(joint.child)]
-        while stack:
-            link = stack.pop()
-            stack.extend(below.get(link, []))
+        load = 0.0
+        for link in moving_with(robot, str(joint.child)):
             inertial = model.link_map[link].inertial
             if inertial is None or inertial.mass is None:
                 continue
             offset = inertial.origin[:3, 3] if inertial.origin is not None else np.zeros(3)
             centre = frames[link][:3, :3] @ offset + frames[link][:3, 3]
             lever = 1.0 if joint.type == "prismatic" else float(np.linalg.norm(centre - origin))
-            load += GRAVITY * float(inertial.mass) * lever
+            load += g * float(inertial.mass) * lever
         loads[name] = load
     return loads
 
