@@ -36,18 +36,17 @@ class PhysicsConfig:
         timestep: physics step (s); default 1/240 s.
         substeps: physics steps per control step; default 10 (control at 24 Hz).
         gravity: (m/s²), z up.
-        self_collision: collide non-adjacent links of the arm with each other (default off:
-            the reach task has no obstacles and the paper's arm ignores self-contact).
-        inertia_from_file: use the URDF's inertia tensors (default on) rather than ones
-            the engine derives from collision shapes.
+        self_collision: collide non-adjacent links of the arm with each other (default off).
+        inertia_from_file: use the URDF's inertia tensors (default on), not the engine's guesses.
         ground: add a static ground plane at z = 0 that collides with the arm.
         visuals: load the URDF's visual meshes (default on); an env that never renders
             (``render_mode=None``) turns them off, and a backend may then skip them to save
             memory. Physics is the same either way.
-        engine_drag: keep the drag an engine puts on every moving link by default, which no
-            URDF states (PyBullet: ``linearDamping`` and ``angularDamping`` 0.04; MuJoCo
-            applies none). Default off; on gives the dynamics of the env ids before
-            ``Reach-v2`` (``Reach-v0``/``v1``, ``Grasp-v0``, ``ReachAround-v0``).
+        engine_drag: keep the drag an engine puts on every moving link, which no URDF states
+            (PyBullet's 0.04; MuJoCo has none).
+        iterative_solver: solve motors and contacts iteratively (PyBullet: Gauss-Seidel instead
+            of its direct Dantzig solver; MuJoCo: no change). Both on: the dynamics of the ids
+            before ``Reach-v2`` (``Reach-v0``/``v1``, ``Grasp-v0``, ``ReachAround-v0``).
     """
 
     timestep: float = 1.0 / 240.0
@@ -58,6 +57,7 @@ class PhysicsConfig:
     ground: bool = True
     visuals: bool = True
     engine_drag: bool = False
+    iterative_solver: bool = False
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.timestep) and 0.0 < self.timestep <= 0.1):

@@ -60,8 +60,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         backend: registered backend name (default :data:`~armreach_core.plugins.defaults.DEFAULT_BACKEND`).
         urdf: path to a URDF; default the task's bundled robot.
         ee_link: end-effector link; default the robot's.
-        render_mode: ``None``, ``"rgb_array"`` (images, no display needed) or ``"human"`` (a
-            live window paced to real time; needs a display, e.g. ``xvfb-run`` on a server).
+        render_mode: ``None``, ``"rgb_array"`` (images) or ``"human"`` (a live window paced to real time).
         robot: a registered robot name instead of ``urdf``.
         home: initial joint configuration (rad); default the robot's home.
         max_joint_step: joint change (rad) for an action of 1, default 0.05.
@@ -74,15 +73,14 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         joint_limit_penalty: subtracted from the reward on each step whose target left the
             joint limits, default 0 (the paper's reward). Training shaping: a policy trained
             with clipping and a penalty also keeps within the limits under the paper's rule.
-        self_collision, inertia_from_file, engine_drag: see :class:`~armreach_core.backend.PhysicsConfig`
-            (``engine_drag=True``: the dynamics of older env ids).
+        self_collision, inertia_from_file, engine_drag, iterative_solver: see
+            :class:`~armreach_core.backend.PhysicsConfig` (both ``True``: the dynamics of older env ids).
         camera: a :class:`~armreach_core.backend.Camera` for rendering.
         tool_joints: joints off the arm's chain to actuate too (a gripper's fingers);
             default the registered robot's (none for a ``urdf``).
         allow_external_meshes: let ``urdf`` use meshes outside its folder or ROS package
             (default: the ``ARMREACH_ALLOW_EXTERNAL_MESHES`` environment variable, else no).
-        base_position: where the robot's root link sits in the world, ``(x, y, z)`` in m;
-            default the origin. Positions in observations are in the world frame.
+        base_position: the robot's root link in the world, ``(x, y, z)`` in m (observations are in the world frame).
         base_orientation: the root link's orientation, a quaternion ``(w, x, y, z)``
             (normalized); default no rotation.
         package_dirs: where ROS packages live, ``{name: folder}``, for ``$(find NAME)`` and
@@ -121,6 +119,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self_collision: bool = False,
         inertia_from_file: bool = True,
         engine_drag: bool = False,
+        iterative_solver: bool = False,
         camera: Camera | None = None,
         tool_joints: tuple[str, ...] | list[str] | None = None,
         allow_external_meshes: bool | None = None,
@@ -186,6 +185,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             inertia_from_file=inertia_from_file,
             visuals=render_mode is not None,
             engine_drag=engine_drag,
+            iterative_solver=iterative_solver,
         )
         self.camera = camera or Camera()
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.physics.control_dt)}

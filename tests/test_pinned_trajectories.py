@@ -140,14 +140,16 @@ def test_seeded_trajectories_stay_identical(backend: str, seed: int) -> None:
 @pytest.mark.skipif("pybullet" not in BACKENDS, reason="PyBullet is not installed")
 @pytest.mark.parametrize("seed", SEEDS)
 def test_engine_drag_gives_the_dynamics_of_the_older_ids_bit_for_bit(seed: int) -> None:
-    """``engine_drag=True`` (``Reach-v1``) reproduces PyBullet's trajectories as they were pinned
-    before its links lost their drag; without it they differ."""
+    """``engine_drag=True, iterative_solver=True`` (``Reach-v1``) reproduces PyBullet's trajectories
+    as they were pinned before its links lost their drag and its solver became the direct one;
+    without them they differ, and the drag alone does not reproduce them."""
     want = json.loads(ENGINE_DRAG_PINNED.read_text())[f"pybullet/{seed}"]
-    got = trajectory("pybullet", seed, engine_drag=True)
+    got = trajectory("pybullet", seed, engine_drag=True, iterative_solver=True)
     assert got["ends"] == want["ends"]
     np.testing.assert_array_equal(got["observations"], want["observations"])
     np.testing.assert_array_equal(got["rewards"], want["rewards"])
     assert not np.array_equal(trajectory("pybullet", seed)["observations"], want["observations"])
+    assert not np.array_equal(trajectory("pybullet", seed, engine_drag=True)["observations"], want["observations"])
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

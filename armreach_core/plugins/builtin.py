@@ -24,8 +24,8 @@ def armreach_register_tasks(register: Register) -> None:
             name=DEFAULT_TASK,
             env_id="armreach/Reach-v2",
             deprecated_ids={
-                "armreach/Reach-v0": {"targets_clear_of_arm": False, "engine_drag": True},
-                "armreach/Reach-v1": {"engine_drag": True},
+                "armreach/Reach-v0": {"targets_clear_of_arm": False, "engine_drag": True, "iterative_solver": True},
+                "armreach/Reach-v1": {"engine_drag": True, "iterative_solver": True},
             },
             load="armreach_core.tasks.reach.task:ReachTask",
             robot=DEFAULT_ROBOT,

@@ -45,10 +45,20 @@ def load_failure(robot: RobotModel, detail: str) -> str:
 
 
 def build_world(cid: int, physics: PhysicsConfig) -> None:
-    """Gravity, time step and solver sweeps of client ``cid``, and the ground when ``physics`` has one."""
+    """Gravity, time step and constraint solver of client ``cid``, and the ground when ``physics`` has one.
+
+    The solver is Bullet's direct one (Dantzig's MLCP), which solves the motors' and contacts'
+    rows exactly in one pass, unless ``physics.iterative_solver`` keeps projected Gauss-Seidel.
+    Gauss-Seidel needs up to :data:`SOLVER_ITERATIONS` sweeps where joints are nearly coaxial or
+    links rest on the ground (xArm7, the KR16, the Panda: 0.37-0.49 of ar6's env steps/s),
+    and it converges to the same motion (docs/benchmarks.md, "Detailed and heavy arms").
+    """
     pb.setGravity(*physics.gravity, physicsClientId=cid)
     pb.setTimeStep(physics.timestep, physicsClientId=cid)
     pb.setPhysicsEngineParameter(numSolverIterations=SOLVER_ITERATIONS, physicsClientId=cid)
+    if not physics.iterative_solver:
+        with engine_output_to_log():  # Bullet prints which solver it switched to
+            pb.setPhysicsEngineParameter(constraintSolverType=pb.CONSTRAINT_SOLVER_LCP_DANTZIG, physicsClientId=cid)
     if physics.ground:
         shape = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=cid)
         visual = pb.createVisualShape(
