@@ -73,6 +73,21 @@ def test_bench_command_writes_json_and_table(tmp_path, capsys) -> None:
     assert table in capsys.readouterr().out
 
 
+def test_bench_corpus_writes_each_arms_share_of_the_bundled_arm(tmp_path, capsys) -> None:
+    out = tmp_path / "speed"
+    argv = ["bench", "--corpus", "--arms", "ur5", "--backends", "pybullet", "--steps", "30", "--repeats", "1"]
+    assert main([*argv, "--out", str(out)]) == 0
+    (row,) = json.loads((out / "corpus-speed.json").read_text())["arms"]
+    assert (row["arm"], row["backend"]) == ("ur5", "pybullet")
+    assert row["share"] == pytest.approx(row["steps_per_s"] / row["reference_steps_per_s"])
+    assert (out / "corpus-speed.md").read_text() in capsys.readouterr().out
+    assert main(["bench", "--corpus", "--urdf", "arm.urdf"]) == 2
+    assert "--corpus times the corpus arms; drop --urdf" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["bench", "--corpus", "--arms", "no-such-arm"])
+    assert "no corpus arm 'no-such-arm'" in capsys.readouterr().err
+
+
 def test_bench_rejects_bad_options(capsys) -> None:
     pytest.importorskip("stable_baselines3", reason="the training throughput options need the rl extra")
     assert main(["bench", "--sb3", "a2c=5"]) == 2

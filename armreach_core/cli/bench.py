@@ -6,8 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from armreach_core.cli.checks import add_arms_argument, check_out, check_urdf
 from armreach_core.cli.checks import check_backends as check_installed
-from armreach_core.cli.checks import check_out, check_urdf
 from armreach_core.cli.robot_args import add_robot_arguments, description_kwargs, robot_kwargs
 
 
@@ -16,7 +16,9 @@ def add_parser(sub: Any) -> None:
     parser.add_argument(
         "--backends", nargs="+", default=None, help="backends (default: every installed one but variants)"
     )
-    parser.add_argument("--steps", type=int, default=5000, help="timed steps per measurement (default: 5000)")
+    parser.add_argument(
+        "--steps", type=int, default=None, help="timed steps per measurement (default: 5000; --corpus: 1000)"
+    )
     parser.add_argument("--repeats", type=int, default=5, help="repeats, taken in turns; the best is kept (default: 5)")
     parser.add_argument(
         "--episode-steps",
@@ -36,6 +38,13 @@ def add_parser(sub: Any) -> None:
         help="learners whose training speed is measured, side by side (default: %(default)s)",
     )
     parser.add_argument("--out", type=Path, default=None, help="write bench.json and bench.md into this folder")
+    parser.add_argument(
+        "--corpus",
+        action="store_true",
+        help="time every corpus arm's env step against the bundled arm's, in turns, on each backend "
+        "(writes corpus-speed.json and corpus-speed.md; --steps per repeat, default 1000 here)",
+    )
+    add_arms_argument(parser)
     learning = parser.add_argument_group("learning speed (--learning)")
     learning.add_argument(
         "--learning",
@@ -58,7 +67,10 @@ def run(args: argparse.Namespace) -> int:
     check_out(args.out)
     if args.learning:
         return run_learning(args)
-    if args.steps < 10 or args.repeats < 1:
+    if args.corpus:
+        return run_corpus(args)
+    steps = 5000 if args.steps is None else args.steps
+    if steps < 10 or args.repeats < 1:
         raise ConfigError("--steps must be >= 10 and --repeats >= 1")
     if args.episode_steps is not None and args.episode_steps < 1:
         raise ConfigError(f"--episode-steps must be >= 1, got {args.episode_steps}")
@@ -88,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
         measure_sb3 = bench_training
     results = run_bench(
         backends,
-        steps=args.steps,
+        steps=steps,
         repeats=args.repeats,
         vector=not args.no_vector,
         sb3_steps=sb3,
@@ -100,6 +112,29 @@ def run(args: argparse.Namespace) -> int:
     print(to_markdown(results))
     if args.out is not None:
         saved = save(results, args.out)
+        print(f"saved {saved[0]} and {saved[1]}")
+    return 0
+
+
+def run_corpus(args: argparse.Namespace) -> int:
+    """``--corpus``: each corpus arm's env steps/s over the bundled arm's, timed in turns."""
+    from armreach_core.diagnostics import arm_speed
+    from armreach_core.diagnostics.installed import installed_backends
+    from armreach_core.errors import ConfigError
+
+    if args.urdf is not None:
+        raise ConfigError("--corpus times the corpus arms; drop --urdf")
+    steps = 1000 if args.steps is None else args.steps
+    if steps < 10 or args.repeats < 1:
+        raise ConfigError("--steps must be >= 10 and --repeats >= 1")
+    backends = args.backends or installed_backends()
+    check_installed(backends)
+    speeds = [
+        s for b in backends for s in arm_speed.corpus_speeds(b, steps=steps, repeats=args.repeats, arms=args.arms)
+    ]
+    print(arm_speed.to_markdown(speeds))
+    if args.out is not None:
+        saved = arm_speed.save(speeds, args.out)
         print(f"saved {saved[0]} and {saved[1]}")
     return 0
 
