@@ -54,6 +54,10 @@ class Episode:
     #: Steps after which a moving link touched anything (the ground, a body, itself); counted
     #: only when asked (``count_contacts``), else 0.
     contact_steps: int = 0
+    #: Steps from the first such step to the last, both counted (0 without contact): how long the
+    #: episode was in touch, whatever an engine reports of a link resting on a surface in between
+    #: (MuJoCo's soft contact lets a link pressed on the ground part from it for a step).
+    contact_span: int = 0
 
 
 #: How an episode can end: the goal reached, a joint limit (the paper's rule), the step limit,
@@ -121,6 +125,7 @@ class EvaluationResult:
         return {
             "contact_steps": int(sum(e.contact_steps for e in self.episodes)),
             "contact_episode_rate": float(np.mean([e.contact_steps > 0 for e in self.episodes])),
+            "contact_span_steps": int(sum(e.contact_span for e in self.episodes)),
         }
 
     def _endings(self) -> tuple[str, ...]:
@@ -171,6 +176,7 @@ def run_episodes(
             obs, info = env.reset(seed=seed + i)
             qs = [base.backend.joint_state()[0].copy()]
             total, violations, steps, collisions, contacts = 0.0, 0, 0, 0, 0
+            first_contact = last_contact = -1
             clearance = float(info.get("clearance", np.nan))
             if on_frame is not None:
                 on_frame(i, base)
@@ -180,8 +186,10 @@ def run_episodes(
                 total += float(reward)
                 violations += int(info.get("joint_limit_violation", False))
                 collisions += int(info.get("collision", False))
-                if count_contacts:
-                    contacts += bool(base.backend.links_in_contact())
+                if count_contacts and base.backend.links_in_contact():
+                    contacts += 1
+                    first_contact = steps if first_contact < 0 else first_contact
+                    last_contact = steps
                 clearance = min(clearance, float(info.get("clearance", np.nan)))
                 steps += 1
                 if on_frame is not None:
@@ -206,6 +214,7 @@ def run_episodes(
                     collisions,
                     clearance,
                     contacts,
+                    last_contact - first_contact + 1 if first_contact >= 0 else 0,
                 )
             )
     finally:
