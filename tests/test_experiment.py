@@ -167,6 +167,10 @@ def test_runs_trained_side_by_side_give_the_runs_trained_one_after_another(tmp_p
         )
         assert [r.seeds for r in results] == [[0, 1], [0, 1]]
         assert log.getvalue().count("training") == 4
+        if jobs == 2:  # side by side, the runs with a gradient step per env step start first
+            assert [line.split(",")[0] for line in log.getvalue().splitlines()[:4]] == ["training DDPG"] * 2 + [
+                "training PPO"
+            ] * 2
         outcomes[jobs] = {
             d.name: ((d / "eval-pybullet" / "episodes.csv").read_text(), _training_returns(d))
             for d in sorted(out.iterdir())
