@@ -68,7 +68,7 @@ bench: $(STAMP)
 	$(BIN)/armreach bench --out runs/bench
 
 demo: $(STAMP)
-	$(BIN)/armreach experiment paper --seeds 1 --steps 4096 --steps fast-ppo=114688 --steps fast-sac=20000 --episodes 20 --fast --jobs 2 --out runs/demo
+	$(BIN)/armreach experiment paper --seeds 1 --steps 2048 --steps fast-ppo=114688 --steps fast-sac=20000 --episodes 20 --fast --jobs 2 --out runs/demo
 
 clean:
 	rm -rf $(VENV) $(VENV310) build dist *.egg-info runs .pytest_cache .mypy_cache .ruff_cache
