@@ -60,7 +60,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         backend: registered backend name (default :data:`~armreach_core.plugins.defaults.DEFAULT_BACKEND`).
         urdf: path to a URDF; default the task's bundled robot.
         ee_link: end-effector link; default the robot's.
-        render_mode: ``None``, ``"rgb_array"`` (images) or ``"human"`` (a live window paced to real time).
+        render_mode: ``None``, ``"rgb_array"`` (images) or ``"human"`` (a real-time window; ``xvfb-run`` on a server).
         robot: a registered robot name instead of ``urdf``.
         home: initial joint configuration (rad); default the robot's home.
         max_joint_step: joint change (rad) for an action of 1, default 0.05.
@@ -80,7 +80,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             default the registered robot's (none for a ``urdf``).
         allow_external_meshes: let ``urdf`` use meshes outside its folder or ROS package
             (default: the ``ARMREACH_ALLOW_EXTERNAL_MESHES`` environment variable, else no).
-        base_position: the robot's root link in the world, ``(x, y, z)`` in m (observations are in the world frame).
+        base_position: the root link in the world, ``(x, y, z)`` in m, default the origin (observations: world frame).
         base_orientation: the root link's orientation, a quaternion ``(w, x, y, z)``
             (normalized); default no rotation.
         package_dirs: where ROS packages live, ``{name: folder}``, for ``$(find NAME)`` and

@@ -218,12 +218,13 @@ def _run_jobs(
     context = multiprocessing.get_context("spawn")
     with concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
         futures = {}
-        for job in sorted(jobs, key=_longest_first):
+        for i in sorted(range(len(jobs)), key=lambda i: _longest_first(jobs[i])):
+            job = jobs[i]
             _log(stream, f"{job.action} {job.label}, seed {job.seed}: {job.run_dir}")
-            futures[id(job)] = pool.submit(_train_and_evaluate, job, episodes, backend, None, command)
+            futures[i] = pool.submit(_train_and_evaluate, job, episodes, backend, None, command)
         try:
-            for job in jobs:
-                yield job, futures[id(job)].result()
+            for i, job in enumerate(jobs):
+                yield job, futures[i].result()
         except BaseException:
             pool.shutdown(wait=True, cancel_futures=True)
             raise
