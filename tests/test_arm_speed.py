@@ -3,7 +3,7 @@
 Each arm is timed as ``armreach bench`` times an env step (random actions in episodes of
 :data:`~armreach_core.diagnostics.bench.EPISODE_STEPS` from home, the best of repeats),
 against ar6 in turns in the same test, so that other load on the machine hits both alike.
-The shares are bounds a little under those measured (docs/benchmarks.md, "Detailed and
+The shares are bounds under the lowest of three runs (docs/benchmarks.md, "Detailed and
 heavy arms"); they fail if a gripper's held joints are simulated as joints again (Trossen's
 WidowX 250 s and PincherX 100, the Panda), if the WidowX's placeholder gripper inertias reach
 the engines again (0.31 of ar6 with them, 0.55 without), or if the benchmark's episodes become
@@ -15,7 +15,6 @@ Gauss-Seidel again (the xArm7's nearly coaxial joints and the KR16's ground cont
 from __future__ import annotations
 
 import json
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -26,15 +25,6 @@ from armreach_core.diagnostics.corpus import corpus_arm
 from tests.conftest import BACKENDS
 
 STEPS, REPEATS = 1000, 5  # the best of 5 in turns: one burst of other load does not decide
-
-
-def _trossen(name: str) -> dict[str, Any]:
-    """A Trossen arm of ``rtb-data`` (xacro), as ``armreach robot`` is given it."""
-    try:
-        root = Path(str(metadata.distribution("rtb-data").locate_file("rtbdata/xacro/trossen_descriptions")))
-    except metadata.PackageNotFoundError:
-        pytest.skip("rtb-data is not installed (pip install rtb-data)")
-    return {"urdf": str(root / "urdf" / f"{name}.urdf.xacro"), "package_dirs": {"trossen_descriptions": str(root)}}
 
 
 def _corpus(name: str) -> dict[str, Any]:
@@ -55,12 +45,12 @@ def _share_of_ar6(arm: dict[str, Any]) -> float:
 @pytest.mark.parametrize(
     ("name", "least"),
     # measured with Bullet's direct solver 0.80-0.93, 0.58-0.67, 0.51-0.64, 0.69-0.88, 0.73-0.77 and
-    # 0.80-0.88 (three runs); with
-    # Gauss-Seidel 0.59, 0.52-0.55, 0.46-0.49, 0.97-0.99, 0.37-0.38 and 0.39-0.41 (before the held
-    # joints were welded: 0.43, 0.20, 0.37, and 0.3 for the KR210 in one 2,000-step random walk)
+    # 0.80-0.88 (three runs); with Gauss-Seidel 0.59, 0.52-0.55, 0.46-0.49, 0.97-0.99, 0.37-0.38 and
+    # 0.39-0.41 (before the held joints were welded: 0.43, 0.20, 0.37, and 0.3 for the KR210 in one
+    # 2,000-step random walk)
     [
-        ("px100", 0.68),
-        ("wx250s", 0.5),
+        ("pincherx-100", 0.68),
+        ("widowx-250s", 0.5),
         ("panda", 0.45),
         ("kuka-kr210", 0.6),
         ("xarm7", 0.6),
@@ -68,8 +58,7 @@ def _share_of_ar6(arm: dict[str, Any]) -> float:
     ],
 )
 def test_an_arm_keeps_its_share_of_ar6s_pybullet_speed(name: str, least: float) -> None:
-    arm = _trossen(name) if name in ("px100", "wx250s") else _corpus(name)
-    share = _share_of_ar6(arm)
+    share = _share_of_ar6(_corpus(name))
     assert share >= least, f"{name} steps at {share:.2f} of ar6's PyBullet speed (expected >= {least})"
 
 
