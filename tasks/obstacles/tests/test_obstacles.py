@@ -173,7 +173,7 @@ def test_goal_conditioned_form_is_a_dict() -> None:
         assert made.observation_space.contains(obs)
 
 
-@pytest.mark.parametrize("margin", [None, 0.04])
+@pytest.mark.parametrize("margin", [None, 0.06])  # the scene check's path, the shipped preset's
 def test_the_reference_gets_back_to_its_path_when_pushed_off_it(env: Any, margin: float | None) -> None:
     """Imitation asks the reference about states it did not lead to: pushed off, it still arrives clear."""
     u = env.unwrapped
