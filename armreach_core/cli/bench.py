@@ -60,8 +60,7 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from armreach_core.diagnostics.bench import check_backends, run_bench, save, to_markdown
-    from armreach_core.diagnostics.installed import installed_backends
+    from armreach_core.diagnostics.bench import run_bench, save, to_markdown
     from armreach_core.errors import ConfigError
 
     check_out(args.out)
@@ -69,14 +68,8 @@ def run(args: argparse.Namespace) -> int:
         return run_learning(args)
     if args.corpus:
         return run_corpus(args)
-    steps = 5000 if args.steps is None else args.steps
-    if steps < 10 or args.repeats < 1:
-        raise ConfigError("--steps must be >= 10 and --repeats >= 1")
-    if args.episode_steps is not None and args.episode_steps < 1:
-        raise ConfigError(f"--episode-steps must be >= 1, got {args.episode_steps}")
-    backends = args.backends or installed_backends()
-    check_backends(backends)  # at least one
-    check_installed(backends)  # and each one's engine imports
+    steps = _checked_counts(args, 5000)
+    backends = _checked_backends(args)
     check_urdf(args.urdf, description_kwargs(args))
     sb3: dict[str, int] = {}
     learners: list[str] = []
@@ -116,32 +109,55 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _checked_counts(args: argparse.Namespace, default_steps: int) -> int:
+    """``--steps`` (``default_steps`` when not given), with ``--repeats`` and ``--episode-steps`` checked."""
+    from armreach_core.errors import ConfigError
+
+    steps = default_steps if args.steps is None else args.steps
+    if steps < 10 or args.repeats < 1:
+        raise ConfigError("--steps must be >= 10 and --repeats >= 1")
+    if args.episode_steps is not None and args.episode_steps < 1:
+        raise ConfigError(f"--episode-steps must be >= 1, got {args.episode_steps}")
+    return steps
+
+
+def _checked_backends(args: argparse.Namespace) -> list[str]:
+    """``--backends`` (every installed one when not given): at least one, each one's engine importable."""
+    from armreach_core.diagnostics.bench import check_backends
+    from armreach_core.diagnostics.installed import installed_backends
+
+    backends: list[str] = args.backends or installed_backends()
+    check_backends(backends)
+    check_installed(backends)
+    return backends
+
+
 def run_corpus(args: argparse.Namespace) -> int:
     """``--corpus``: each corpus arm's env steps/s over the bundled arm's, timed in turns."""
     from armreach_core.diagnostics import arm_speed
-    from armreach_core.diagnostics.installed import installed_backends
+    from armreach_core.diagnostics.bench import EPISODE_STEPS
     from armreach_core.errors import ConfigError
 
     if args.urdf is not None:
         raise ConfigError("--corpus times the corpus arms; drop --urdf")
-    steps = 1000 if args.steps is None else args.steps
-    if steps < 10 or args.repeats < 1:
-        raise ConfigError("--steps must be >= 10 and --repeats >= 1")
-    backends = args.backends or installed_backends()
-    check_installed(backends)
+    steps = _checked_counts(args, 1000)
+    episode_steps = args.episode_steps or EPISODE_STEPS
     speeds = [
-        s for b in backends for s in arm_speed.corpus_speeds(b, steps=steps, repeats=args.repeats, arms=args.arms)
+        speed
+        for backend in _checked_backends(args)
+        for speed in arm_speed.corpus_speeds(
+            backend, steps=steps, repeats=args.repeats, episode_steps=episode_steps, arms=args.arms
+        )
     ]
     print(arm_speed.to_markdown(speeds))
     if args.out is not None:
-        saved = arm_speed.save(speeds, args.out)
+        saved = arm_speed.save(speeds, args.out, episode_steps=episode_steps)
         print(f"saved {saved[0]} and {saved[1]}")
     return 0
 
 
 def run_learning(args: argparse.Namespace) -> int:
     """``--learning``: the preset's algorithms, each trained to its threshold over ``--seeds`` seeds."""
-    from armreach_core.diagnostics.installed import installed_backends
     from armreach_core.errors import ConfigError
     from armreach_core.plugins.defaults import DEFAULT_TASK
     from armreach_core.rl.learning_bench import bench_learning, summarize, to_markdown
@@ -166,8 +182,7 @@ def run_learning(args: argparse.Namespace) -> int:
             f"preset {args.preset!r} does not stop at a success rate for {', '.join(missing)}: "
             "add an until_success section to time it"
         )
-    backends = args.backends or installed_backends()
-    check_installed(backends)
+    backends = _checked_backends(args)
     results = bench_learning(algos, backends, args.seeds, args.out, preset=args.preset)
     print(to_markdown(summarize(results)))
     print(f"saved {args.out / 'learning.json'} and {args.out / 'learning.md'}")

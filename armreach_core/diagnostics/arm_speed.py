@@ -40,11 +40,11 @@ class ArmSpeed:
 
 
 def share_of_reference(
-    arm: Mapping[str, Any], backend: str, *, steps: int = 1000, repeats: int = 3
+    arm: Mapping[str, Any], backend: str, *, steps: int = 1000, repeats: int = 3, episode_steps: int = EPISODE_STEPS
 ) -> tuple[float, float]:
     """Env steps/s of the env built with ``arm``'s keyword arguments and of the bundled arm's,
-    each the best of ``repeats`` taken in turns."""
-    envs = [ArmEnv(backend=backend, max_episode_steps=EPISODE_STEPS, **kwargs) for kwargs in ({}, arm)]
+    each the best of ``repeats`` taken in turns, in episodes of ``episode_steps``."""
+    envs = [ArmEnv(backend=backend, max_episode_steps=episode_steps, **kwargs) for kwargs in ({}, arm)]
     try:
         best = [0.0, 0.0]
         for _ in range(repeats):
@@ -61,13 +61,15 @@ def corpus_speeds(
     *,
     steps: int = 1000,
     repeats: int = 3,
+    episode_steps: int = EPISODE_STEPS,
     arms: Sequence[str] | None = None,
     log: Callable[[str], None] = print,
 ) -> list[ArmSpeed]:
     """:func:`share_of_reference` on every installed corpus arm (or on ``arms``), logging each."""
 
     def one(arm: CorpusArm, urdf: Path) -> ArmSpeed:
-        own, reference = share_of_reference({"urdf": str(urdf), **arm.options()}, backend, steps=steps, repeats=repeats)
+        kwargs = {"urdf": str(urdf), **arm.options()}
+        own, reference = share_of_reference(kwargs, backend, steps=steps, repeats=repeats, episode_steps=episode_steps)
         speed = ArmSpeed(arm.name, backend, own, reference)
         log(f"{arm.name}: {own:,.0f} env steps/s, {speed.share:.2f} of the bundled arm's {reference:,.0f}")
         return speed
@@ -96,10 +98,10 @@ def to_markdown(speeds: Sequence[ArmSpeed]) -> str:
     return f"{table}\n\n{verdict}\n\nMachine: {machine()}\n"
 
 
-def save(speeds: Sequence[ArmSpeed], out: Path) -> list[Path]:
-    """``corpus-speed.json`` and ``corpus-speed.md`` in ``out``."""
+def save(speeds: Sequence[ArmSpeed], out: Path, *, episode_steps: int = EPISODE_STEPS) -> list[Path]:
+    """``corpus-speed.json`` and ``corpus-speed.md`` in ``out``; ``episode_steps``: those they were timed in."""
     out.mkdir(parents=True, exist_ok=True)
-    payload = {"machine": machine(), "episode_steps": EPISODE_STEPS, "least_share": LEAST_SHARE}
+    payload: dict[str, Any] = {"machine": machine(), "episode_steps": episode_steps, "least_share": LEAST_SHARE}
     payload["arms"] = [asdict(s) | {"share": s.share} for s in speeds]
     paths = [out / "corpus-speed.json", out / "corpus-speed.md"]
     paths[0].write_text(json.dumps(payload, indent=2) + "\n")
