@@ -29,10 +29,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     ]
     if "contact_steps" in summary:
         touching = f"{100 * summary['contact_episode_rate']:.0f} % of episodes"
-        span = summary.get("contact_span_steps", summary["contact_steps"])  # older summaries have no span
-        rows[-1:-1] = [
-            ("contacts", f"{summary['contact_steps']} steps touching ({span} from first to last), in {touching}")
-        ]
+        span = f" ({summary['contact_span_steps']} from first to last)" if "contact_span_steps" in summary else ""
+        rows[-1:-1] = [("contacts", f"{summary['contact_steps']} steps touching{span}, in {touching}")]
     if "collision_episode_rate" in summary:
         rows[-1:-1] = [
             ("episodes with a collision", f"{100 * summary['collision_episode_rate']:.0f} %"),

@@ -41,7 +41,7 @@ class Outcome:
     contact_episode_rate: float
     steps_to_goal_mean: float
     #: Summed over episodes: the steps from each one's first contact to its last (judged).
-    contact_span_steps: int = 0
+    contact_span_steps: int
 
 
 def contact_slack(episodes: int) -> float:
