@@ -53,3 +53,42 @@ def test_envs_in_subprocesses_give_the_same_model_and_episodes_as_envs_in_one_pr
     assert len(monitors["dummy"]) == len(monitors["subprocess"]) == 2
     for a, b in zip(monitors["dummy"], monitors["subprocess"], strict=True):
         np.testing.assert_array_equal(a["r"], b["r"])
+
+
+@pytest.mark.parametrize("backend", ["pybullet", "mujoco"])
+def test_the_in_process_vec_env_steps_as_sb3s_and_hands_out_its_own_infos(
+    tmp_path: Path, backend: str, request: pytest.FixtureRequest
+) -> None:
+    """Training's vec env (no deep copy of the infos) gives SB3's ``DummyVecEnv``'s transitions."""
+    if backend == "mujoco":
+        pytest.importorskip("mujoco")
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from armreach_core.rl.agents import make_vec_env
+    from armreach_core.rl.config import resolve_config
+    from armreach_core.rl.vec_env import InProcessVecEnv
+
+    config = resolve_config(algo="ppo", preset="fast", backend=backend, n_envs=3)
+    config = config.with_settings(env={**config.env_settings, "max_episode_steps": 7})
+    ours = make_vec_env(config, tmp_path / "a", 3, 3, append=False)
+    assert isinstance(ours, InProcessVecEnv)
+    theirs = make_vec_env(config, tmp_path / "b", 3, 3, append=False)
+    theirs.__class__ = DummyVecEnv  # the same envs, stepped by SB3's own code
+    request.addfinalizer(ours.close)
+    request.addfinalizer(theirs.close)
+    np.testing.assert_array_equal(ours.reset(), theirs.reset())
+    actions = np.random.default_rng(0).uniform(-1, 1, (20, 3, ours.action_space.shape[0])).astype(np.float32)
+    ends = 0
+    for action in actions:
+        (obs_a, rew_a, done_a, info_a), (obs_b, rew_b, done_b, info_b) = ours.step(action), theirs.step(action)
+        np.testing.assert_array_equal(obs_a, obs_b)
+        np.testing.assert_array_equal(rew_a, rew_b)
+        np.testing.assert_array_equal(done_a, done_b)
+        for a, b in zip(info_a, info_b, strict=True):
+            assert a.keys() == b.keys()
+            assert a["is_success"] == b["is_success"] and a["distance"] == b["distance"]
+            if "terminal_observation" in a:
+                np.testing.assert_array_equal(a["terminal_observation"], b["terminal_observation"])
+                ends += 1
+        assert all(a is not kept for a, kept in zip(info_a, ours.buf_infos, strict=True))
+    assert ends == 6  # two 7-step episodes ended in each env

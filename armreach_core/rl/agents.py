@@ -72,7 +72,8 @@ def make_vec_env(config: RunConfig, run_dir: Path, seed: int, n_envs: int, *, ap
     transitions either way).
     """
     from stable_baselines3.common.monitor import Monitor
-    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from armreach_core.rl.vec_env import InProcessVecEnv
 
     monitor_dir = run_dir / "monitor"
     monitor_dir.mkdir(parents=True, exist_ok=True)
@@ -103,7 +104,7 @@ def make_vec_env(config: RunConfig, run_dir: Path, seed: int, n_envs: int, *, ap
         # fork starts a worker in milliseconds; JAX's threads do not survive it, so after JAX, a fresh interpreter
         vec = SubprocVecEnv(factories, start_method="fork" if _fork_safe() else "forkserver")
     else:
-        vec = DummyVecEnv(factories)
+        vec = InProcessVecEnv(factories)
     vec.seed(seed)
     return vec
 
