@@ -9,7 +9,8 @@ configurations drawn uniformly inside the limits and holdable against gravity wi
 URDF's effort limits (:mod:`armreach_core.robot.statics`; for an arm that cannot hold every
 pose, also along the straight joint-space path from home), eroded by one voxel so that every
 kept voxel lies inside the reachable set, not on its rim. It depends on the URDF alone
-and a fixed seed, so it is identical on every backend and every run. Voxels are 4 cm,
+and a fixed seed, so it is identical on every backend and every run, and it is kept on disk
+(:mod:`armreach_core.robot.map_cache`) so that each process does not build it again. Voxels are 4 cm,
 coarser for arms over ~6 m so that the map stays small in memory.
 """
 
@@ -22,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.errors import ConfigError
+from armreach_core.robot import map_cache
 from armreach_core.robot.geometry import clearance, hulls_at, moving_with
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.robot.statics import holdable, holdable_paths
@@ -88,6 +90,27 @@ class ReachabilityMap:
         #: reaches all round its base, else the mean direction of its reachable voxels from the base.
         self.forward = _facing(self.centers(self.origin * voxel, (self.origin + shape) * voxel), robot.base_position)
 
+    def arrays(self) -> dict[str, npt.NDArray[np.generic]]:
+        """The map as arrays (what :mod:`armreach_core.robot.map_cache` stores)."""
+        return {
+            "grid": self.grid,
+            "origin": self.origin,
+            "voxel": np.float64(self.voxel),
+            "reach": np.float64(self.reach),
+            "forward": self.forward,
+        }
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, npt.NDArray[np.generic]]) -> ReachabilityMap:
+        """The map that :meth:`arrays` gave."""
+        restored = cls.__new__(cls)
+        restored.grid = np.asarray(arrays["grid"], dtype=bool)
+        restored.origin = np.asarray(arrays["origin"], dtype=np.int64)
+        restored.voxel = float(arrays["voxel"])
+        restored.reach = float(arrays["reach"])
+        restored.forward = np.asarray(arrays["forward"], dtype=np.float64)
+        return restored
+
     def centers(self, low: npt.ArrayLike, high: npt.ArrayLike) -> FloatArray:
         """Centres of the interior voxels inside the box ``[low, high]`` (m), shape (n, 3)."""
         lo = np.clip(np.floor(np.asarray(low) / self.voxel).astype(np.int64) - self.origin, 0, self.grid.shape)
@@ -120,8 +143,14 @@ def _facing(points: FloatArray, base: npt.ArrayLike) -> FloatArray:
 
 @functools.lru_cache(maxsize=32)
 def reachability_map(robot: RobotModel) -> ReachabilityMap:
-    """The (cached) map of ``robot``."""
-    return ReachabilityMap(robot)
+    """The map of ``robot``: kept for the process, and on disk across processes (:mod:`.map_cache`)."""
+    key = map_cache.map_key(robot, VOXEL, SAMPLES)
+    stored = map_cache.load(robot, key)
+    if stored is not None:
+        return ReachabilityMap.from_arrays(stored)
+    built = ReachabilityMap(robot)
+    map_cache.store(robot, key, built.arrays())
+    return built
 
 
 @functools.lru_cache(maxsize=32)
