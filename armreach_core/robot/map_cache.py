@@ -34,7 +34,7 @@ log = logging.getLogger("armreach.workspace")
 
 CACHE_KIND = "maps"
 #: The arrays a stored map holds.
-FIELDS = ("grid", "origin", "voxel", "reach", "forward")
+FIELDS = ("grid", "origin", "voxel", "farthest", "forward")
 
 
 @functools.lru_cache(maxsize=1)

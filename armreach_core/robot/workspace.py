@@ -96,7 +96,7 @@ class ReachabilityMap:
             "grid": self.grid,
             "origin": self.origin,
             "voxel": np.float64(self.voxel),
-            "reach": np.float64(self.reach),
+            "farthest": np.float64(self.reach),
             "forward": self.forward,
         }
 
@@ -107,7 +107,7 @@ class ReachabilityMap:
         restored.grid = np.asarray(arrays["grid"], dtype=bool)
         restored.origin = np.asarray(arrays["origin"], dtype=np.int64)
         restored.voxel = float(arrays["voxel"])
-        restored.reach = float(arrays["reach"])
+        restored.reach = float(arrays["farthest"])
         restored.forward = np.asarray(arrays["forward"], dtype=np.float64)
         return restored
 
