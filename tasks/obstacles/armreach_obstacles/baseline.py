@@ -1,8 +1,10 @@
 """The planner as a baseline: the reference controller evaluated like a trained policy.
 
-``python -m armreach_obstacles.baseline [episodes] [backend ...] [--urdf PATH]`` prints one
-JSON summary per backend (success, collisions, clearance, steps to goal, jerk), from the
-same seeded episodes ``armreach evaluate`` uses (seeds 10,000 on).
+``python -m armreach_obstacles.baseline [episodes] [backend ...] [--urdf PATH] [arm flags]`` prints
+one JSON summary per backend (success, collisions, clearance, steps to goal, jerk), from the
+same seeded episodes ``armreach evaluate`` uses (seeds 10,000 on). The arm flags are
+``armreach``'s: ``--ee-link``, ``--home``, ``--base-position``, ``--package-dir``,
+``--xacro-arg`` and the rest.
 """
 
 from __future__ import annotations
@@ -47,13 +49,14 @@ def evaluate_planner(backend: str, episodes: int = 100, seed: int = 10_000, **en
 
 def main(argv: list[str] | None = None) -> None:
     import armreach_core
+    from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 
     parser = argparse.ArgumentParser(prog="python -m armreach_obstacles.baseline")
     parser.add_argument("episodes", type=int, nargs="?", default=100)
     parser.add_argument("backends", nargs="*")
-    parser.add_argument("--urdf", default=None)
+    add_robot_arguments(parser)
     args = parser.parse_args(argv)
-    extra = {"urdf": args.urdf} if args.urdf else {}
+    extra = robot_kwargs(args)
     for name in args.backends or armreach_core.available_backends():
         print(json.dumps(evaluate_planner(name, args.episodes, **extra).summary()))
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib
 import itertools
+import json
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -245,3 +246,19 @@ def test_rollout_runs_the_tasks_reference_controller() -> None:
 def test_bad_obstacle_options_are_config_errors(option: dict[str, Any]) -> None:
     with pytest.raises(armreach_core.ConfigError):
         gym.make(ENV_ID, backend=BACKENDS[0], **option)
+
+
+@pytest.mark.training
+def test_the_planner_baseline_takes_the_arm_flags_of_the_command_line(capsys: pytest.CaptureFixture[str]) -> None:
+    """A xacro arm whose ROS package folder is named otherwise, as ``armreach`` takes it."""
+    pytest.importorskip("stable_baselines3")
+    from armreach_core.diagnostics.corpus import corpus_arm
+    from armreach_obstacles.baseline import main as baseline
+
+    arm = corpus_arm("kuka-kr6")
+    dirs = [f"--package-dir={name}={path}" for name, path in arm.options()["package_dirs"].items()]
+    baseline(["2", BACKENDS[0], "--urdf", str(arm.path), *dirs])
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["episodes"] == 2 and summary["ended_by"]["collision"] == 0
+    with pytest.raises(armreach_core.URDFError, match="kuka_"):  # without the folders, the packages are not found
+        baseline(["1", BACKENDS[0], "--urdf", str(arm.path)])
