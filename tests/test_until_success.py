@@ -51,6 +51,26 @@ def test_a_controller_that_never_reaches_is_decided_at_the_failure_that_makes_th
     assert (result.episodes, result.successes, result.passed) == ((3, 0, False) if batch == 1 else (4, 0, False))
 
 
+def test_an_evaluation_stops_at_the_success_that_makes_passing_certain() -> None:
+    """A passing policy's last episode hovering near its target is not run to its time limit."""
+    envs = [ArmEnv(backend="pybullet", max_episode_steps=500) for _ in range(2)]
+    agent = IKAgent()
+    spec = UntilSuccess(threshold=0.9, episodes=10)  # one failure allowed: 9 successes decide
+
+    def policy(batch: np.ndarray) -> np.ndarray:  # env 0 hovers (no action), env 1 reaches
+        hover = np.zeros(envs[0].action_space.shape, np.float32)
+        return np.stack([hover, *(agent.act(obs, envs[1]) for obs in batch[1:])])
+
+    try:
+        result = validate(policy, envs, spec)
+        hovered = envs[0]._elapsed
+    finally:
+        for env in envs:
+            env.close()
+    assert (result.passed, result.successes, result.episodes) == (True, 9, 10)
+    assert hovered < 500  # stopped when env 1's ninth success decided it, not at env 0's limit
+
+
 @pytest.mark.parametrize(
     ("section", "problem"),
     [({"threshold": 1.5}, "threshold"), ({"episodes": 0}, "episodes"), ({"often": 3}, "unknown key")],
