@@ -4,8 +4,8 @@ SB3's ``DummyVecEnv.step_wait`` returns ``deepcopy(self.buf_infos)`` on every st
 an env that hands back the same ``info`` dict twice cannot change what a caller kept. An
 armreach env builds a fresh ``info`` dict on every step and reset, so a copy one level deep
 (a new dict per env, the values shared) keeps the same guarantee for its keys. The deep copy
-cost about a tenth of an env step of the bundled arm (8 envs, random actions, both engines);
-the transitions are the same.
+cost 2-6 % of an env step of the bundled arm (8 envs, random actions; about a tenth under
+load); the transitions are the same.
 """
 
 from __future__ import annotations
