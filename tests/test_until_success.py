@@ -10,6 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -69,6 +70,58 @@ def test_an_evaluation_stops_at_the_success_that_makes_passing_certain() -> None
             env.close()
     assert (result.passed, result.successes, result.episodes) == (True, 9, 10)
     assert hovered < 500  # stopped when env 1's ninth success decided it, not at env 0's limit
+
+
+class _Scripted(gym.Wrapper[Any, Any, Any, Any]):
+    """A real env whose controller reaches with inverse kinematics, or holds still (hovers) in the
+    episodes whose seeds are in ``hover``; it counts each episode's steps by seed."""
+
+    def __init__(self, env: ArmEnv, hover: set[int]) -> None:
+        super().__init__(env)
+        self.hover, self.steps, self.seed = hover, {}, -1
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
+        self.seed, self.agent = int(seed or 0), IKAgent()
+        self.steps[self.seed] = 0
+        return self.env.reset(seed=seed, options=options)
+
+    def step(self, action: Any) -> Any:
+        self.steps[self.seed] += 1
+        base: Any = self.env.unwrapped
+        if self.seed not in self.hover:
+            action = self.agent.act(None, base)
+        else:
+            action = np.zeros(self.action_space.shape, np.float32)
+        return self.env.step(action)
+
+
+@pytest.mark.parametrize("hover", [{1}, {1, 2, 4, 5}])
+def test_an_episode_that_hovers_is_parked_and_run_on_only_when_it_decides(hover: set[int]) -> None:
+    """One hovering episode in a passing evaluation stops at ``park_after``; when hovering decides
+    failure, only the decisive episodes (failures allowed + 1) run to the limit, while without
+    parking every lane beside them hovers too: the same outcome for fewer steps."""
+    spec = UntilSuccess(threshold=0.9, episodes=20, seed=0)  # two failures allowed
+    runs = {}
+    for spare in (0, 3):
+        envs = [_Scripted(ArmEnv(backend="pybullet", max_episode_steps=120), hover) for _ in range(6 + spare)]
+        try:
+            result = validate(lambda obs: np.zeros((len(obs), 6), np.float32), envs, spec, lanes=6, park_after=40)
+        finally:
+            for env in envs:
+                env.close()
+        steps: dict[int, int] = {}
+        for env in envs:
+            steps.update(env.steps)  # an episode runs on one env
+        runs[spare] = result, steps
+    (plain, plain_steps), (parked, parked_steps) = runs[0], runs[3]
+    assert parked.passed == plain.passed == (len(hover) <= spec.allowed_failures)
+    assert sum(parked_steps.values()) < sum(plain_steps.values())
+    at_limit = sorted(seed for seed, n in parked_steps.items() if n == 120)
+    if parked.passed:  # parked (the IK reaches in under 40 steps) and never needed
+        assert parked_steps[1] <= 40 < plain_steps[1] and not at_limit and parked.successes >= 8
+    else:  # the first three hovering episodes decide; the fourth is not run to its limit
+        assert at_limit == [1, 2, 4] and parked.successes + 3 == parked.episodes
+        assert sum(1 for n in plain_steps.values() if n == 120) >= 3
 
 
 @pytest.mark.parametrize(
