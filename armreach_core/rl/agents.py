@@ -68,8 +68,9 @@ def make_vec_env(config: RunConfig, run_dir: Path, seed: int, n_envs: int, *, ap
 
     Env ``i`` is seeded ``seed + i`` at its first reset (SB3's ``VecEnv.seed``). They run in
     this process, or each in a process of its own when the preset says ``vec_env: subprocess``
-    (SB3's ``SubprocVecEnv``: the physics of a step then runs on every core; the same
-    transitions either way).
+    (SB3's ``SubprocVecEnv``), or half here and half in one worker process when it says
+    ``vec_env: split`` (:class:`~armreach_core.rl.split_vec_env.SplitVecEnv`): the physics of
+    a step then runs on both cores. The same transitions whichever way.
     """
     from stable_baselines3.common.monitor import Monitor
 
@@ -98,11 +99,16 @@ def make_vec_env(config: RunConfig, run_dir: Path, seed: int, n_envs: int, *, ap
 
     factories = [factory(i) for i in range(n_envs)]
     vec: VecEnv
+    # fork starts a worker in milliseconds; JAX's threads do not survive it, so after JAX, a fresh interpreter
+    start_method = "fork" if _fork_safe() else "forkserver"
     if config.settings.get("vec_env") == "subprocess" and n_envs > 1:
         from stable_baselines3.common.vec_env import SubprocVecEnv
 
-        # fork starts a worker in milliseconds; JAX's threads do not survive it, so after JAX, a fresh interpreter
-        vec = SubprocVecEnv(factories, start_method="fork" if _fork_safe() else "forkserver")
+        vec = SubprocVecEnv(factories, start_method=start_method)
+    elif config.settings.get("vec_env") == "split" and n_envs > 1:
+        from armreach_core.rl.split_vec_env import SplitVecEnv
+
+        vec = SplitVecEnv(factories, start_method=start_method)
     else:
         vec = InProcessVecEnv(factories)
     vec.seed(seed)

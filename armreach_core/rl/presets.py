@@ -226,8 +226,9 @@ COMMON: dict[str, Check] = {
     "checkpoint_every": _num(int, 1),
     # stop at the first held-out evaluation at or above a success rate (armreach_core.rl.validation)
     "until_success": _section(UNTIL_SUCCESS_SCHEMA),
-    # where the n_envs envs run: this process (dummy) or one process each (subprocess)
-    "vec_env": _choice("dummy", "subprocess"),
+    # where the n_envs envs run: this process (dummy), one process each (subprocess), or half
+    # here and half in one worker process, stepping at the same time (split)
+    "vec_env": _choice("dummy", "subprocess", "split"),
     # the library that trains (armreach_core.rl.learners)
     "learner": _choice(*LEARNERS),
 }
