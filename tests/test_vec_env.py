@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import io
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -79,20 +80,7 @@ def test_the_in_process_vec_env_steps_as_sb3s_and_hands_out_its_own_infos(
     request.addfinalizer(theirs.close)
     np.testing.assert_array_equal(ours.reset(), theirs.reset())
     actions = np.random.default_rng(0).uniform(-1, 1, (20, 3, ours.action_space.shape[0])).astype(np.float32)
-    ends = 0
-    for action in actions:
-        (obs_a, rew_a, done_a, info_a), (obs_b, rew_b, done_b, info_b) = ours.step(action), theirs.step(action)
-        np.testing.assert_array_equal(obs_a, obs_b)
-        np.testing.assert_array_equal(rew_a, rew_b)
-        np.testing.assert_array_equal(done_a, done_b)
-        for a, b in zip(info_a, info_b, strict=True):
-            assert a.keys() == b.keys()
-            assert a["is_success"] == b["is_success"] and a["distance"] == b["distance"]
-            if "terminal_observation" in a:
-                np.testing.assert_array_equal(a["terminal_observation"], b["terminal_observation"])
-                ends += 1
-        assert all(a is not kept for a, kept in zip(info_a, ours.buf_infos, strict=True))
-    assert ends == 6  # two 7-step episodes ended in each env
+    assert _same_steps(ours, theirs, actions, own_infos=True) == 6  # two 7-step episodes ended in each env
 
 
 @pytest.mark.parametrize("backend", ["pybullet", "mujoco"])
@@ -116,18 +104,7 @@ def test_the_split_vec_env_gives_the_in_process_transitions_with_half_its_envs_i
     assert isinstance(split, SplitVecEnv) and split.split == 3 and split.process.is_alive()
     np.testing.assert_array_equal(one.reset(), split.reset())
     actions = np.random.default_rng(1).uniform(-1, 1, (16, 5, one.action_space.shape[0])).astype(np.float32)
-    ends = 0
-    for action in actions:
-        (obs_a, rew_a, done_a, info_a), (obs_b, rew_b, done_b, info_b) = one.step(action), split.step(action)
-        np.testing.assert_array_equal(obs_a, obs_b)
-        np.testing.assert_array_equal(rew_a, rew_b)
-        np.testing.assert_array_equal(done_a, done_b)
-        for a, b in zip(info_a, info_b, strict=True):
-            assert a.keys() == b.keys() and a["distance"] == b["distance"]
-            if "terminal_observation" in a:
-                np.testing.assert_array_equal(a["terminal_observation"], b["terminal_observation"])
-                ends += 1
-    assert ends == 10  # two 7-step episodes ended in each of the five envs
+    assert _same_steps(one, split, actions) == 10  # two 7-step episodes ended in each of the five envs
     for indices in (None, [4, 1], [3]):  # each env's own target, in the order asked
         ours = [task.target for task in split.get_attr("task", indices=indices)]
         np.testing.assert_array_equal(ours, [task.target for task in one.get_attr("task", indices=indices)])
@@ -138,3 +115,23 @@ def test_the_split_vec_env_gives_the_in_process_transitions_with_half_its_envs_i
     np.testing.assert_array_equal(one.reset(), split.reset())  # seeds reach the worker's envs too
     split.close()
     assert not split.process.is_alive()
+
+
+def _same_steps(ours: Any, theirs: Any, actions: np.ndarray, *, own_infos: bool = False) -> int:
+    """Step both vec envs with ``actions``, asserting the same transitions; how many episodes ended.
+    ``own_infos``: every ``info`` handed out is a new dict, not the one ``ours`` keeps."""
+    ends = 0
+    for action in actions:
+        (obs_a, rew_a, done_a, info_a), (obs_b, rew_b, done_b, info_b) = ours.step(action), theirs.step(action)
+        np.testing.assert_array_equal(obs_a, obs_b)
+        np.testing.assert_array_equal(rew_a, rew_b)
+        np.testing.assert_array_equal(done_a, done_b)
+        for a, b in zip(info_a, info_b, strict=True):
+            assert a.keys() == b.keys()
+            assert a["is_success"] == b["is_success"] and a["distance"] == b["distance"]
+            if "terminal_observation" in a:
+                np.testing.assert_array_equal(a["terminal_observation"], b["terminal_observation"])
+                ends += 1
+        if own_infos:
+            assert all(a is not kept for a, kept in zip(info_a, ours.buf_infos, strict=True))
+    return ends
