@@ -110,6 +110,9 @@ def test_the_split_vec_env_gives_the_in_process_transitions_with_half_its_envs_i
         np.testing.assert_array_equal(ours, [task.target for task in one.get_attr("task", indices=indices)])
     assert len({tuple(task.target) for task in split.get_attr("task")}) == 5
     assert split.env_is_wrapped(type(one.envs[0]), indices=[0, 3]) == [True, True]
+    with pytest.raises(AttributeError):  # an error in the worker is raised here, and the worker goes on
+        split.get_attr("no_such_attribute", indices=[4])
+    assert split.get_attr("max_joint_step", indices=[4]) == one.get_attr("max_joint_step", indices=[4])
     split.seed(11)
     one.seed(11)
     np.testing.assert_array_equal(one.reset(), split.reset())  # seeds reach the worker's envs too

@@ -24,25 +24,35 @@ from stable_baselines3.common.vec_env.base_vec_env import CloudpickleWrapper
 from armreach_core.rl.vec_env import InProcessVecEnv
 
 
+class _Failure:
+    """An exception raised in the worker, sent back to be raised again in the training process."""
+
+    def __init__(self, error: BaseException) -> None:
+        self.error = error
+
+
 def _worker(remote: Connection, parent: Connection, factories: CloudpickleWrapper) -> None:
     parent.close()
     vec = InProcessVecEnv(factories.var)
     try:
         while True:
             command, data = remote.recv()
-            if command == "step":
-                vec.step_async(data)
-                remote.send(vec.step_wait())
-            elif command == "reset":
-                vec._seeds, vec._options = data
-                remote.send((vec.reset(), vec.reset_infos))
-            elif command == "call":
-                name, args, kwargs = data
-                remote.send(getattr(vec, name)(*args, **kwargs))
-            elif command == "close":
+            if command == "close":
                 vec.close()
                 remote.send(None)
                 return
+            try:
+                if command == "step":
+                    vec.step_async(data)
+                    remote.send(vec.step_wait())
+                elif command == "reset":
+                    vec._seeds, vec._options = data
+                    remote.send((vec.reset(), vec.reset_infos))
+                else:  # "call": a VecEnv method by name
+                    name, args, kwargs = data
+                    remote.send(getattr(vec, name)(*args, **kwargs))
+            except Exception as error:  # an env's error: the training process raises it
+                remote.send(_Failure(error))
     except (EOFError, KeyboardInterrupt):  # the main process went away
         vec.close()
 
@@ -77,7 +87,7 @@ class SplitVecEnv(VecEnv):
 
     def step_wait(self) -> Any:
         obs, rewards, dones, infos = self.local.step_wait()
-        far_obs, far_rewards, far_dones, far_infos = self.remote.recv()
+        far_obs, far_rewards, far_dones, far_infos = self._receive()
         return (
             _join(obs, far_obs),
             np.concatenate([rewards, far_rewards]),
@@ -90,7 +100,7 @@ class SplitVecEnv(VecEnv):
         self.remote.send(("reset", (self._seeds[self.split :], self._options[self.split :])))
         self.local._seeds, self.local._options = self._seeds[: self.split], self._options[: self.split]
         obs = self.local.reset()
-        far_obs, far_infos = self.remote.recv()
+        far_obs, far_infos = self._receive()
         self.reset_infos = list(self.local.reset_infos) + list(far_infos)
         self._reset_seeds()
         self._reset_options()
@@ -110,6 +120,16 @@ class SplitVecEnv(VecEnv):
         if self.process.is_alive():
             self.process.terminate()
 
+    def _receive(self) -> Any:
+        """The worker's answer; an error it raised is raised here."""
+        try:
+            answer = self.remote.recv()
+        except EOFError:
+            raise RuntimeError("the split vectorised env's worker process ended unexpectedly") from None
+        if isinstance(answer, _Failure):
+            raise answer.error
+        return answer
+
     # -- attributes and methods, by env index ------------------------------------------
     def _both(self, name: str, indices: Any, *args: Any, **kwargs: Any) -> list[Any]:
         """``name`` (a ``VecEnv`` method taking ``indices``) on the envs of ``indices``, each in
@@ -118,13 +138,12 @@ class SplitVecEnv(VecEnv):
         near = [i for i in chosen if i < self.split]
         far = [i - self.split for i in chosen if i >= self.split]
         results: dict[int, Any] = {}
-        if far:
-            self.remote.send(("call", (name, args, {**kwargs, "indices": far})))
         if near:  # set_attr answers None
             answer = getattr(self.local, name)(*args, indices=near, **kwargs) or [None] * len(near)
             results.update(zip(near, answer, strict=True))
         if far:
-            reply = self.remote.recv() or [None] * len(far)
+            self.remote.send(("call", (name, args, {**kwargs, "indices": far})))
+            reply = self._receive() or [None] * len(far)
             results.update(zip([i + self.split for i in far], reply, strict=True))
         return [results[i] for i in chosen]
 
@@ -142,7 +161,7 @@ class SplitVecEnv(VecEnv):
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         self.remote.send(("call", ("get_images", (), {})))
-        return list(self.local.get_images()) + list(self.remote.recv())
+        return list(self.local.get_images()) + list(self._receive())
 
 
 def _join(near: Any, far: Any) -> Any:
