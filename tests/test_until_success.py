@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import json
 import shutil
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -191,3 +193,72 @@ def test_the_fast_preset_stops_at_its_first_passed_evaluation_and_holds_on_the_f
     assert code == 0, err
     assert json.loads((evaluation / "summary.json").read_text())["success_rate"] >= 0.95
     shutil.rmtree(run_dir)
+
+
+def _train_until(run_dir: Path, background: bool) -> tuple[list[dict[str, float]], int, dict[str, np.ndarray], Any]:
+    """A short PPO run evaluated every 128 steps on envs where success is within 0.3 m (so that a
+    young policy passes after some failures); its validation rows, steps and parameters."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from armreach_core.rl.background import parameters
+    from armreach_core.rl.stop_on_success import StopOnSuccessCallback
+
+    run_dir.mkdir()
+    venv = make_vec_env(functools.partial(ArmEnv, backend="pybullet", max_episode_steps=50), n_envs=2, seed=0)
+    model = PPO("MlpPolicy", venv, n_steps=64, batch_size=64, n_epochs=2, seed=0, device="cpu")
+    spec = UntilSuccess(threshold=0.3, episodes=10, every=128, gate=1.0, background=background)
+    easy = functools.partial(ArmEnv, backend="pybullet", success_threshold=0.3, max_episode_steps=60)
+    callback = StopOnSuccessCallback(spec, easy, run_dir, time.perf_counter)
+    try:
+        model.learn(3000, callback=callback)
+        callback.finish()
+    finally:
+        callback.close()
+        venv.close()
+    return read_validations(run_dir), int(model.num_timesteps), parameters(model.policy), callback
+
+
+@pytest.mark.training
+def test_evaluations_in_a_worker_stop_training_at_the_step_and_with_the_model_of_the_foreground(
+    tmp_path: Path,
+) -> None:
+    """The worker answers as the training process would: the same rows, the same stop, and the
+    model put back to the passed evaluation's parameters though training went on meanwhile."""
+    rows, steps, params, here = _train_until(tmp_path / "here", background=False)
+    worker_rows, worker_steps, worker_params, there = _train_until(tmp_path / "worker", background=True)
+    assert here.worker is None and there.asked == [] and there.passed is not None
+
+    def decided(table: list[dict[str, float]]) -> list[tuple[float, ...]]:
+        return [tuple(row[key] for key in ("timesteps", "episodes", "successes", "passed")) for row in table]
+
+    assert decided(worker_rows) == decided(rows)
+    assert rows[-1]["passed"] == 1 and 0 < sum(row["passed"] for row in rows) == 1  # failures, then a pass
+    assert worker_steps == steps == rows[-1]["timesteps"] < 3000
+    assert worker_params.keys() == params.keys()
+    assert all(np.array_equal(worker_params[key], params[key]) for key in params)
+
+
+def test_an_evaluation_worker_raises_its_envs_error_and_is_stopped_while_evaluating() -> None:
+    from stable_baselines3 import PPO
+
+    from armreach_core.errors import BackendUnavailableError
+    from armreach_core.rl.background import BackgroundValidator, parameters
+
+    env = ArmEnv(backend="pybullet")
+    policy = PPO("MlpPolicy", env, device="cpu").policy
+    env.close()
+    spec = UntilSuccess(threshold=0.9, episodes=20)
+    broken = BackgroundValidator(functools.partial(ArmEnv, backend="no-such-engine"), spec)
+    try:
+        broken.submit(policy, parameters(policy))
+        with pytest.raises(BackendUnavailableError, match="no-such-engine"):
+            broken.result()
+    finally:
+        broken.close()
+    busy = BackgroundValidator(functools.partial(ArmEnv, backend="pybullet"), spec)
+    busy.submit(policy, parameters(policy))  # an untrained policy: 2,048-step episodes
+    time.sleep(0.5)
+    t0 = time.perf_counter()
+    busy.close()
+    assert not busy.process.is_alive() and time.perf_counter() - t0 < 2.0

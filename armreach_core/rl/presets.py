@@ -213,6 +213,8 @@ UNTIL_SUCCESS_SCHEMA: dict[str, Check] = {
     "every": _num(int, 1),
     "seed": _num(int, 0),
     "gate": _num(float, 0.0, 1.0),
+    # evaluate in a worker process while training goes on (torch policies; else in the training process)
+    "background": _bool,
 }
 COMMON: dict[str, Check] = {
     "timesteps": _num(int, 1),

@@ -23,8 +23,9 @@ from armreach_core.rl.checkpoints import read_progress, save_checkpoint
 from armreach_core.rl.config import RunConfig
 from armreach_core.rl.learners import algo_class, configure_xla
 from armreach_core.rl.presets import RL_ALGOS
+from armreach_core.rl.stop_on_success import StopOnSuccessCallback
 from armreach_core.rl.timing import RolloutTimer, TimedVecEnv, split, write_timing
-from armreach_core.rl.validation import StopOnSuccessCallback, UntilSuccess, Validation
+from armreach_core.rl.validation import UntilSuccess, Validation
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
@@ -188,6 +189,7 @@ def train(
     call_start = time.perf_counter()
     env = TimedVecEnv(make_vec_env(config, run_dir, seed_base(config.seed), config.n_envs, append=resume))
     rollouts = RolloutTimer()
+    until: StopOnSuccessCallback | None = None
     t0 = time.perf_counter()  # training time includes demonstrations and imitation
     try:
         if resume:
@@ -211,7 +213,6 @@ def train(
         def train_seconds() -> float:
             return base_seconds + time.perf_counter() - t0
 
-        until: StopOnSuccessCallback | None = None
         with signals.installed():
             rows: dict[str, int] | None = None
             if remaining > 0:
@@ -233,6 +234,8 @@ def train(
                         reset_num_timesteps=False,
                         tb_log_name=config.algo,
                     )
+                if until is not None:  # an evaluation still running in the background decides first
+                    until.finish(wait=not signals.requested)
                 if signals.requested:
                     # Count only what the checkpoint keeps: PPO drops its unfinished rollout, and an
                     # off-policy stop happens before the last step's transition is stored.
@@ -252,4 +255,6 @@ def train(
         write_timing(run_dir, parts, int(model.num_timesteps))
         return TrainResult(run_dir, int(model.num_timesteps), config.timesteps, signals.requested, seconds, passed)
     finally:
+        if until is not None:
+            until.close()
         env.close()

@@ -23,9 +23,12 @@ Cheap enough to run often:
   to their end: those count as failures, and a passed evaluation's success rate is a lower
   bound;
 * it runs only once the success rate of the last 100 training episodes is within ``gate``
-  of the threshold (training episodes are shorter, so they under-estimate it).
+  of the threshold (training episodes are shorter, so they under-estimate it);
+* it runs in a worker process, on the core training leaves idle, while training goes on
+  (``background``, on by default; :mod:`armreach_core.rl.background`).
 
-Every evaluation is a row of ``validation.csv`` in the run folder.
+Every evaluation is a row of ``validation.csv`` in the run folder;
+:class:`~armreach_core.rl.stop_on_success.StopOnSuccessCallback` runs them during training.
 """
 
 from __future__ import annotations
@@ -39,7 +42,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.callbacks import BaseCallback
 
 from armreach_core.errors import ConfigError
 
@@ -64,6 +66,8 @@ class UntilSuccess:
     seed: int = 50_000
     #: Evaluate once the training success rate is at least ``threshold - gate``.
     gate: float = 0.1
+    #: Evaluate in a worker process while training goes on (:mod:`armreach_core.rl.background`).
+    background: bool = True
 
     @classmethod
     def from_settings(cls, settings: Mapping[str, Any]) -> UntilSuccess | None:
@@ -168,92 +172,18 @@ def validate(
     return Validation(successes + failures, successes, False, time.perf_counter() - t0)
 
 
+def evaluation_envs(spec: UntilSuccess) -> int:
+    """The envs an evaluation of ``spec`` runs on: :data:`BATCH` lanes, and a spare env for each
+    episode whose failure could decide it (the failures allowed, plus one) to park episodes in."""
+    lanes = min(spec.episodes, BATCH)
+    return lanes + min(spec.allowed_failures + 1, spec.episodes - lanes)
+
+
 def _stack(observations: list[Any]) -> Any:
     """A batch of observations: stacked arrays, or a dict of stacked arrays (goal-conditioned envs)."""
     if isinstance(observations[0], dict):
         return {key: np.stack([o[key] for o in observations]) for key in observations[0]}
     return np.stack(observations)
-
-
-class StopOnSuccessCallback(BaseCallback):
-    """Evaluates the policy on held-out targets as training goes and stops training at the first pass.
-
-    ``make_env`` builds the evaluation env (the paper's task) on first use; ``train_seconds``
-    gives the run's training time for the rows of ``validation.csv`` in ``run_dir``.
-    """
-
-    def __init__(
-        self,
-        spec: UntilSuccess,
-        make_env: Callable[[], Any],
-        run_dir: Path,
-        train_seconds: Callable[[], float],
-    ) -> None:
-        super().__init__()
-        self.spec = spec
-        self.make_env = make_env
-        self.path = run_dir / VALIDATION
-        self.train_seconds = train_seconds
-        self.envs: list[Any] = []
-        self.last = 0
-        #: The evaluation that stopped training, if one did.
-        self.passed: Validation | None = None
-        #: Seconds spent evaluating.
-        self.seconds = 0.0
-
-    def _on_training_start(self) -> None:
-        self.last = int(self.model.num_timesteps)
-
-    def _on_step(self) -> bool:
-        steps = int(self.model.num_timesteps)
-        if steps - self.last < self.spec.every or not self._gate_open():
-            return True
-        self.last = steps
-        if not self.envs:
-            lanes = min(self.spec.episodes, BATCH)
-            spare = min(self.spec.allowed_failures + 1, self.spec.episodes - lanes)  # one per deciding episode
-            self.envs = [self.make_env() for _ in range(lanes + spare)]
-        model = self.model
-
-        def policy(obs: Any) -> Any:
-            return model.predict(obs, deterministic=True)[0]
-
-        result = validate(policy, self.envs, self.spec, lanes=BATCH)
-        self.seconds += result.seconds
-        self._record(steps, result)
-        if result.passed:
-            self.passed = result
-            return False
-        return True
-
-    def _gate_open(self) -> bool:
-        buffer = getattr(self.model, "ep_success_buffer", None)
-        if not buffer:
-            return False
-        return bool(sum(buffer) / len(buffer) >= self.spec.threshold - self.spec.gate)
-
-    def _record(self, steps: int, result: Validation) -> None:
-        new = not self.path.is_file()
-        with open(self.path, "a", newline="", encoding="utf-8") as handle:
-            writer = csv.writer(handle)
-            if new:
-                writer.writerow(COLUMNS)
-            writer.writerow(
-                [
-                    steps,
-                    f"{self.train_seconds():.3f}",
-                    result.episodes,
-                    result.successes,
-                    f"{result.success_rate:.4f}",
-                    int(result.passed),
-                    f"{result.seconds:.3f}",
-                ]
-            )
-
-    def _on_training_end(self) -> None:
-        for env in self.envs:
-            env.close()
-        self.envs = []
 
 
 def read_validations(run_dir: Path) -> list[dict[str, float]]:

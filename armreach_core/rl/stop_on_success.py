@@ -1,0 +1,160 @@
+"""The SB3 callback that evaluates on held-out targets as training goes and stops at the first pass.
+
+Every ``until_success.every`` env steps, once the training success rate opens the gate,
+the policy is evaluated (:func:`~armreach_core.rl.validation.validate`). With
+``background`` (the default, for torch policies) the evaluation runs in a worker process
+(:class:`~armreach_core.rl.background.BackgroundValidator`) on a copy of the policy's
+parameters while training goes on; its answer is read at the next step after it comes.
+The worker answers in order; training waits only when :data:`MAX_PENDING` evaluations are
+still unanswered at the next evaluation point. When one passes, the model gets the evaluated parameters and step count
+back and training stops: the run ends with the model that the same evaluation run in the
+training process would have stopped at, the same bit for bit, having spent less time.
+Training past that point (a second or two) is not kept: ``checkpoint.json`` and
+``validation.csv`` give the evaluated step, ``train_seconds`` the time the answer came.
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from stable_baselines3.common.callbacks import BaseCallback
+
+from armreach_core.rl.background import BackgroundValidator, Parameters, load_parameters, parameters
+from armreach_core.rl.validation import BATCH, COLUMNS, VALIDATION, UntilSuccess, Validation, evaluation_envs, validate
+
+#: Evaluations asked of the worker before training waits for the oldest answer.
+MAX_PENDING = 2
+
+
+class StopOnSuccessCallback(BaseCallback):
+    """Evaluates the policy on held-out targets as training goes and stops training at the first pass.
+
+    ``make_env`` builds the evaluation env (the paper's task) on first use; ``train_seconds``
+    gives the run's training time for the rows of ``validation.csv`` in ``run_dir``. Call
+    :meth:`finish` once training has returned (it reads an evaluation still running and
+    stops the worker) and :meth:`close` in any case.
+    """
+
+    def __init__(
+        self,
+        spec: UntilSuccess,
+        make_env: Callable[[], Any],
+        run_dir: Path,
+        train_seconds: Callable[[], float],
+    ) -> None:
+        super().__init__()
+        self.spec = spec
+        self.make_env = make_env
+        self.path = run_dir / VALIDATION
+        self.train_seconds = train_seconds
+        self.envs: list[Any] = []
+        self.last = 0
+        #: The evaluation that stopped training, if one did.
+        self.passed: Validation | None = None
+        #: Seconds the training process spent evaluating, or waiting for an evaluation.
+        self.seconds = 0.0
+        self.worker: BackgroundValidator | None = None
+        #: The step counts and parameters of the evaluations the worker has not answered yet.
+        self.asked: list[tuple[int, Parameters]] = []
+
+    def _on_training_start(self) -> None:
+        import torch
+
+        self.last = int(self.model.num_timesteps)
+        if self.spec.background and isinstance(self.model.policy, torch.nn.Module) and self.worker is None:
+            self.worker = BackgroundValidator(self.make_env, self.spec)
+
+    def _on_step(self) -> bool:
+        if self.worker is not None and self.worker.ready() and self._answer():
+            return False
+        steps = int(self.model.num_timesteps)
+        if steps - self.last < self.spec.every or not self._gate_open():
+            return True
+        self.last = steps
+        if self.worker is not None:
+            while len(self.asked) >= MAX_PENDING:  # answered in order, a few at a time
+                if self._answer():
+                    return False
+            t0 = self.train_seconds()
+            self.asked.append((steps, parameters(self.model.policy)))
+            self.worker.submit(self.model.policy, self.asked[-1][1])
+            self.seconds += self.train_seconds() - t0
+            return True
+        if not self.envs:
+            self.envs = [self.make_env() for _ in range(evaluation_envs(self.spec))]
+        model = self.model
+
+        def policy(obs: Any) -> Any:
+            return model.predict(obs, deterministic=True)[0]
+
+        result = validate(policy, self.envs, self.spec, lanes=BATCH)
+        self.seconds += result.seconds
+        self._record(steps, result)
+        if result.passed:
+            self.passed = result
+            return False
+        return True
+
+    def _answer(self) -> bool:
+        """Read the worker's oldest answer (waiting for it) and record it; True when it passed,
+        the model then holding the parameters and step count it was asked about."""
+        assert self.worker is not None
+        t0 = self.train_seconds()
+        result = self.worker.result()
+        self.seconds += self.train_seconds() - t0
+        steps, params = self.asked.pop(0)
+        self._record(steps, result)
+        if not result.passed:
+            return False
+        self.passed = result
+        load_parameters(self.model.policy, params)
+        self.model.num_timesteps = steps
+        return True
+
+    def finish(self, wait: bool = True) -> None:
+        """Once training has returned: read the evaluations still running (unless ``wait`` is
+        False, as when a signal stopped training), then stop the worker."""
+        while wait and self.passed is None and self.asked:
+            self._answer()
+        self.close()
+
+    def close(self) -> None:
+        if self.worker is not None:
+            self.worker.close()
+            self.worker = None
+        self.asked = []
+
+    def _gate_open(self) -> bool:
+        buffer = getattr(self.model, "ep_success_buffer", None)
+        if not buffer:
+            return False
+        return bool(sum(buffer) / len(buffer) >= self.spec.threshold - self.spec.gate)
+
+    def _record(self, steps: int, result: Validation) -> None:
+        new = not self.path.is_file()
+        with open(self.path, "a", newline="", encoding="utf-8") as handle:
+            writer = csv.writer(handle)
+            if new:
+                writer.writerow(COLUMNS)
+            writer.writerow(
+                [
+                    steps,
+                    f"{self.train_seconds():.3f}",
+                    result.episodes,
+                    result.successes,
+                    f"{result.success_rate:.4f}",
+                    int(result.passed),
+                    f"{result.seconds:.3f}",
+                ]
+            )
+
+    def _on_training_end(self) -> None:
+        for env in self.envs:
+            env.close()
+        self.envs = []
+
+
+__all__ = ["StopOnSuccessCallback"]
