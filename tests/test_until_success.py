@@ -262,3 +262,20 @@ def test_an_evaluation_worker_raises_its_envs_error_and_is_stopped_while_evaluat
     t0 = time.perf_counter()
     busy.close()
     assert not busy.process.is_alive() and time.perf_counter() - t0 < 2.0
+
+
+def test_only_policies_with_torch_parameters_are_evaluated_in_a_worker() -> None:
+    """SBX's JAX policies are torch modules without torch parameters: a worker given a copy of
+    one would evaluate its first parameters forever, so they are evaluated in training's process."""
+    from stable_baselines3 import PPO
+
+    from armreach_core.rl.background import holds_torch_parameters
+    from armreach_core.rl.learners import algo_class
+
+    env = ArmEnv(backend="pybullet")
+    try:
+        assert holds_torch_parameters(PPO("MlpPolicy", env, device="cpu").policy)
+        jax_sac = algo_class("sac", "sbx")("MlpPolicy", env, learning_starts=10)
+        assert not holds_torch_parameters(jax_sac.policy)
+    finally:
+        env.close()

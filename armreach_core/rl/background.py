@@ -37,6 +37,14 @@ class _Failure:
         self.error = error
 
 
+def holds_torch_parameters(policy: Any) -> bool:
+    """Whether ``policy`` is a torch module that keeps its parameters in torch (SB3's policies);
+    SBX's JAX policies are torch modules too, with their parameters in JAX train states."""
+    import torch
+
+    return isinstance(policy, torch.nn.Module) and next(policy.parameters(), None) is not None
+
+
 def parameters(policy: Any) -> Parameters:
     """A copy of a torch policy's parameters and buffers, as NumPy arrays."""
     return {key: value.detach().cpu().numpy().copy() for key, value in policy.state_dict().items()}
@@ -148,4 +156,4 @@ class BackgroundValidator:
         self.remote.close()
 
 
-__all__ = ["BackgroundValidator", "Parameters", "load_parameters", "parameters"]
+__all__ = ["BackgroundValidator", "Parameters", "holds_torch_parameters", "load_parameters", "parameters"]

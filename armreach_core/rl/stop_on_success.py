@@ -2,15 +2,17 @@
 
 Every ``until_success.every`` env steps, once the training success rate opens the gate,
 the policy is evaluated (:func:`~armreach_core.rl.validation.validate`). With
-``background`` (the default, for torch policies) the evaluation runs in a worker process
+``background`` (the default, for policies with torch parameters; SBX's are evaluated here)
+the evaluation runs in a worker process
 (:class:`~armreach_core.rl.background.BackgroundValidator`) on a copy of the policy's
 parameters while training goes on; its answer is read at the next step after it comes.
 The worker answers in order; training waits only when :data:`MAX_PENDING` evaluations are
-still unanswered at the next evaluation point. When one passes, the model gets the evaluated parameters and step count
-back and training stops: the run ends with the model that the same evaluation run in the
-training process would have stopped at, the same bit for bit, having spent less time.
-Training past that point (a second or two) is not kept: ``checkpoint.json`` and
-``validation.csv`` give the evaluated step, ``train_seconds`` the time the answer came.
+still unanswered at the next evaluation point. When one passes, the model gets the
+evaluated parameters and step count back and training stops: the run ends with the model
+that the same evaluation run in the training process would have stopped at, the same bit
+for bit, having spent less time. Training past that point (a second or two) is not kept:
+``checkpoint.json`` and ``validation.csv`` give the evaluated step, ``train_seconds`` the
+time the answer came.
 """
 
 from __future__ import annotations
@@ -22,7 +24,13 @@ from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback
 
-from armreach_core.rl.background import BackgroundValidator, Parameters, load_parameters, parameters
+from armreach_core.rl.background import (
+    BackgroundValidator,
+    Parameters,
+    holds_torch_parameters,
+    load_parameters,
+    parameters,
+)
 from armreach_core.rl.validation import BATCH, COLUMNS, VALIDATION, UntilSuccess, Validation, evaluation_envs, validate
 
 #: Evaluations asked of the worker before training waits for the oldest answer.
@@ -61,10 +69,8 @@ class StopOnSuccessCallback(BaseCallback):
         self.asked: list[tuple[int, Parameters]] = []
 
     def _on_training_start(self) -> None:
-        import torch
-
         self.last = int(self.model.num_timesteps)
-        if self.spec.background and isinstance(self.model.policy, torch.nn.Module) and self.worker is None:
+        if self.spec.background and holds_torch_parameters(self.model.policy) and self.worker is None:
             self.worker = BackgroundValidator(self.make_env, self.spec)
 
     def _on_step(self) -> bool:
