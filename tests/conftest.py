@@ -83,6 +83,15 @@ reach:
 
 
 @pytest.fixture(scope="session", autouse=True)
+def sb3_log_folder(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """SB3's ``learn()`` without a TensorBoard folder makes a folder of its own in the system's
+    temporary folder (``/tmp/SB3-<time>``) every call; the tests' go into theirs."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("SB3_LOGDIR", str(tmp_path_factory.mktemp("sb3")))
+        yield
+
+
+@pytest.fixture(scope="session", autouse=True)
 def xla_compilation_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
     """One XLA compilation cache on disk for the session and the trainings it starts in subprocesses.
 
