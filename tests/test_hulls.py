@@ -55,6 +55,27 @@ def test_hull_of_a_mesh_is_within_the_tolerance_of_its_convex_hull(tmp_path, mon
     assert convex_hull(mesh_file) == hull_file  # cached: the same file again
 
 
+def test_copies_of_a_mesh_share_one_cached_hull_and_an_edited_mesh_gets_its_own(tmp_path, monkeypatch):
+    """Keyed by contents: another clone or install of an arm adds nothing to the cache."""
+    import os
+    import shutil
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    box = trimesh.creation.box((0.1, 0.2, 0.3))
+    first, second, edited = (tmp_path / name / "link.stl" for name in ("a", "b", "c"))
+    for path in (first, second, edited):
+        path.parent.mkdir()
+    box.export(first)
+    shutil.copy(first, second)
+    os.utime(second, ns=(1, 1))  # another time too, as a fresh clone gives
+    trimesh.creation.box((0.1, 0.2, 0.4)).export(edited)
+    assert first.stat().st_size == edited.stat().st_size  # only the bytes differ
+    hull = convex_hull(first)
+    assert convex_hull(second) == hull
+    assert convex_hull(edited) != hull and convex_hull(edited).is_file()
+    assert len(list((tmp_path / "cache" / "armreach" / "hulls").glob("*.obj"))) == 2
+
+
 def test_a_small_hull_is_kept_whole():
     box = trimesh.creation.box((0.1, 0.2, 0.3))
     assert simplified(box.convex_hull, HULL_TOLERANCE) is not None

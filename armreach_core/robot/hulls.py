@@ -13,7 +13,7 @@ than :data:`HULL_TOLERANCE` outside: a few hundred vertices at most on the corpu
 the collision shape shrinks by at most :data:`HULL_TOLERANCE` (docs/arms.md has the counts).
 
 Hulls live in ``$XDG_CACHE_HOME/armreach/hulls`` (default ``~/.cache``), keyed by the
-mesh's path, size and modification time; a file trimesh cannot read, or one whose hull is
+mesh file's name and contents; a file trimesh cannot read, or one whose hull is
 degenerate, is left as it is (logged).
 """
 
@@ -47,9 +47,23 @@ def cache_dir(kind: str) -> Path:
 
 
 def file_key(path: Path) -> str:
-    """A short key that changes when the file at ``path`` does."""
+    """A short key of the bytes of the file at ``path``: copies of a mesh (another clone, a
+    package installed twice) share their cache entries, and an edited file gets a new one.
+    Each file is read once per process while its size and modification time stay. A ``.gltf``
+    may keep its geometry in files beside it, so its key is its path's too."""
     stat = path.stat()
-    return hashlib.sha1(f"{path}:{stat.st_mtime_ns}:{stat.st_size}".encode()).hexdigest()[:16]
+    stamp = (str(path), stat.st_mtime_ns, stat.st_size)
+    key = _KEYS.get(stamp)
+    if key is None:
+        digest = hashlib.sha1(str(path).encode() if path.suffix.lower() == ".gltf" else b"")
+        with open(path, "rb") as handle:
+            for block in iter(lambda: handle.read(1 << 20), b""):
+                digest.update(block)
+        key = _KEYS[stamp] = digest.hexdigest()[:16]
+    return key
+
+
+_KEYS: dict[tuple[str, int, int], str] = {}
 
 
 def convex_hull(path: Path) -> Path:

@@ -3,8 +3,8 @@
 PyBullet reads ``.obj``, ``.stl`` and ``.dae``; MuJoCo ``.obj``, ``.stl`` and ``.msh``. A
 description may use any format trimesh reads (glTF/GLB, PLY, OFF, 3MF, DAE for MuJoCo...):
 such a mesh is converted once to ``.obj`` (all its parts, their transforms applied) into the
-cache the hulls use (:func:`armreach_core.robot.hulls.cache_dir`), keyed by the file's path,
-size and modification time. A collision mesh becomes its convex hull first
+cache the hulls use (:func:`armreach_core.robot.hulls.cache_dir`), keyed by the file's name
+and contents. A collision mesh becomes its convex hull first
 (:mod:`armreach_core.robot.hulls`), which is already an ``.obj``.
 
 An ``.obj`` carries no colour here, so a visual whose URDF gives no ``<material>`` colour
