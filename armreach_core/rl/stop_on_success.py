@@ -8,9 +8,9 @@ the evaluation runs in a worker process
 parameters while training goes on; its answer is read at the next step after it comes.
 The worker answers in order; training waits only when :data:`MAX_PENDING` evaluations are
 still unanswered at the next evaluation point. When one passes, the model gets the
-evaluated parameters and step count back and training stops: the run ends with the model
-that the same evaluation run in the training process would have stopped at, the same bit
-for bit, having spent less time. Training past that point (a second or two) is not kept:
+evaluated parameters and step count back and training stops: the run ends with the policy
+parameters that the same evaluation run in the training process would have stopped at, the
+same bit for bit, having spent less time. Training past that point (a second or two) is not kept:
 ``checkpoint.json`` and ``validation.csv`` give the evaluated step, ``train_seconds`` the
 time the answer came.
 """
