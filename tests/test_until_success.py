@@ -195,18 +195,27 @@ def test_the_fast_preset_stops_at_its_first_passed_evaluation_and_holds_on_the_f
     shutil.rmtree(run_dir)
 
 
-def _train_until(run_dir: Path, background: bool) -> tuple[list[dict[str, float]], int, dict[str, np.ndarray], Any]:
-    """A short PPO run evaluated every 128 steps on envs where success is within 0.3 m (so that a
-    young policy passes after some failures); its validation rows, steps and parameters."""
-    from stable_baselines3 import PPO
+def _train_until(
+    run_dir: Path, background: bool, learner: str
+) -> tuple[list[dict[str, float]], int, dict[str, np.ndarray], Any]:
+    """A short run (SB3's PPO or SBX's SAC) evaluated every 128 steps on envs where success is
+    within 0.3 m, so that a young policy passes after some failures; its validation rows,
+    steps, parameters and callback."""
+    import jax
     from stable_baselines3.common.env_util import make_vec_env
 
-    from armreach_core.rl.background import parameters
+    from armreach_core.rl.background import snapshot
+    from armreach_core.rl.learners import algo_class
     from armreach_core.rl.stop_on_success import StopOnSuccessCallback
 
     run_dir.mkdir()
-    venv = make_vec_env(functools.partial(ArmEnv, backend="pybullet", max_episode_steps=50), n_envs=2, seed=0)
-    model = PPO("MlpPolicy", venv, n_steps=64, batch_size=64, n_epochs=2, seed=0, device="cpu")
+    train_env = functools.partial(ArmEnv, backend="pybullet", max_episode_steps=50, distance_exponent=1.0)
+    venv = make_vec_env(train_env, n_envs=2, seed=0)
+    if learner == "sb3":
+        model = algo_class("ppo", "sb3")("MlpPolicy", venv, n_steps=64, batch_size=64, n_epochs=2, seed=0, device="cpu")
+    else:  # the fast preset's SAC
+        settings = {"learning_rate": 1e-3, "gamma": 0.95, "tau": 0.02, "batch_size": 128, "learning_starts": 200}
+        model = algo_class("sac", "sbx")("MlpPolicy", venv, policy_kwargs={"net_arch": [64, 64]}, seed=0, **settings)
     spec = UntilSuccess(threshold=0.3, episodes=10, every=128, gate=1.0, background=background)
     easy = functools.partial(ArmEnv, backend="pybullet", success_threshold=0.3, max_episode_steps=60)
     callback = StopOnSuccessCallback(spec, easy, run_dir, time.perf_counter)
@@ -216,26 +225,32 @@ def _train_until(run_dir: Path, background: bool) -> tuple[list[dict[str, float]
     finally:
         callback.close()
         venv.close()
-    return read_validations(run_dir), int(model.num_timesteps), parameters(model.policy), callback
+    flat = jax.tree_util.tree_flatten_with_path(snapshot(model.policy))[0]
+    # the networks (SBX: params and target params; an optimizer's state is not the policy)
+    params = {jax.tree_util.keystr(path): np.asarray(leaf) for path, leaf in flat}
+    params = {key: value for key, value in params.items() if ".opt_state" not in key}
+    return read_validations(run_dir), int(model.num_timesteps), params, callback
 
 
 @pytest.mark.training
+@pytest.mark.parametrize("learner", ["sb3", "sbx"])
 def test_evaluations_in_a_worker_stop_training_at_the_step_and_with_the_model_of_the_foreground(
-    tmp_path: Path,
+    tmp_path: Path, learner: str
 ) -> None:
     """The worker answers as the training process would: the same rows, the same stop, and the
-    model put back to the passed evaluation's parameters though training went on meanwhile."""
-    rows, steps, params, here = _train_until(tmp_path / "here", background=False)
-    worker_rows, worker_steps, worker_params, there = _train_until(tmp_path / "worker", background=True)
+    policy put back to the passed evaluation's parameters though training went on meanwhile.
+    SB3's policies travel as torch parameters, SBX's as JAX train states."""
+    rows, steps, params, here = _train_until(tmp_path / "here", False, learner)
+    worker_rows, worker_steps, worker_params, there = _train_until(tmp_path / "worker", True, learner)
     assert here.worker is None and there.asked == [] and there.passed is not None
 
     def decided(table: list[dict[str, float]]) -> list[tuple[float, ...]]:
         return [tuple(row[key] for key in ("timesteps", "episodes", "successes", "passed")) for row in table]
 
     assert decided(worker_rows) == decided(rows)
-    assert rows[-1]["passed"] == 1 and 0 < sum(row["passed"] for row in rows) == 1  # failures, then a pass
+    assert rows[-1]["passed"] == 1 and 0 < sum(row["passed"] for row in rows) == 1 < len(rows)  # failures, a pass
     assert worker_steps == steps == rows[-1]["timesteps"] < 3000
-    assert worker_params.keys() == params.keys()
+    assert worker_params.keys() == params.keys() and len(params) > 4
     assert all(np.array_equal(worker_params[key], params[key]) for key in params)
 
 
@@ -243,7 +258,7 @@ def test_an_evaluation_worker_raises_its_envs_error_and_is_stopped_while_evaluat
     from stable_baselines3 import PPO
 
     from armreach_core.errors import BackendUnavailableError
-    from armreach_core.rl.background import BackgroundValidator, parameters
+    from armreach_core.rl.background import BackgroundValidator, snapshot
 
     env = ArmEnv(backend="pybullet")
     policy = PPO("MlpPolicy", env, device="cpu").policy
@@ -251,31 +266,39 @@ def test_an_evaluation_worker_raises_its_envs_error_and_is_stopped_while_evaluat
     spec = UntilSuccess(threshold=0.9, episodes=20)
     broken = BackgroundValidator(functools.partial(ArmEnv, backend="no-such-engine"), spec)
     try:
-        broken.submit(policy, parameters(policy))
+        broken.submit(policy, snapshot(policy))
         with pytest.raises(BackendUnavailableError, match="no-such-engine"):
             broken.result()
     finally:
         broken.close()
     busy = BackgroundValidator(functools.partial(ArmEnv, backend="pybullet"), spec)
-    busy.submit(policy, parameters(policy))  # an untrained policy: 2,048-step episodes
+    busy.submit(policy, snapshot(policy))  # an untrained policy: 2,048-step episodes
     time.sleep(0.5)
     t0 = time.perf_counter()
     busy.close()
     assert not busy.process.is_alive() and time.perf_counter() - t0 < 2.0
 
 
-def test_only_policies_with_torch_parameters_are_evaluated_in_a_worker() -> None:
-    """SBX's JAX policies are torch modules without torch parameters: a worker given a copy of
-    one would evaluate its first parameters forever, so they are evaluated in training's process."""
+def test_sb3_and_sbx_policies_are_copied_to_a_worker_by_what_holds_their_parameters() -> None:
+    """SBX's JAX policies are torch modules without torch parameters: copied as torch modules, a
+    worker would evaluate their first parameters forever; their train states travel instead."""
     from stable_baselines3 import PPO
 
-    from armreach_core.rl.background import holds_torch_parameters
+    from armreach_core.rl.background import copyable, for_worker, holds_torch_parameters, load_parameters, snapshot
     from armreach_core.rl.learners import algo_class
 
     env = ArmEnv(backend="pybullet")
     try:
-        assert holds_torch_parameters(PPO("MlpPolicy", env, device="cpu").policy)
-        jax_sac = algo_class("sac", "sbx")("MlpPolicy", env, learning_starts=10)
-        assert not holds_torch_parameters(jax_sac.policy)
+        ppo = PPO("MlpPolicy", env, device="cpu").policy
+        sac = algo_class("sac", "sbx")("MlpPolicy", env, learning_starts=10, seed=0)
+        assert holds_torch_parameters(ppo) and copyable(ppo)
+        assert not holds_torch_parameters(sac.policy) and copyable(sac.policy)
+        obs = np.stack([env.reset(seed=s)[0] for s in range(4)])
+        before = sac.policy.predict(obs, deterministic=True)[0]
+        taken = snapshot(sac.policy)
+        sac.learn(60)  # new train states
+        assert not np.array_equal(sac.policy.predict(obs, deterministic=True)[0], before)
+        load_parameters(sac.policy, for_worker(sac.policy, taken))  # as a worker's copy gets them
+        assert np.array_equal(sac.policy.predict(obs, deterministic=True)[0], before)
     finally:
         env.close()

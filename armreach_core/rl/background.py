@@ -21,13 +21,12 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
-import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import CloudpickleWrapper
 
 from armreach_core.rl.validation import BATCH, UntilSuccess, Validation, evaluation_envs, validate
 
-#: The parameters of a policy: its ``state_dict`` as NumPy arrays.
-Parameters = dict[str, np.ndarray]
+#: What a worker needs to act as the policy did: arrays only (see :func:`for_worker`).
+Parameters = dict[str, Any]
 
 
 class _Failure:
@@ -45,16 +44,59 @@ def holds_torch_parameters(policy: Any) -> bool:
     return isinstance(policy, torch.nn.Module) and next(policy.parameters(), None) is not None
 
 
-def parameters(policy: Any) -> Parameters:
-    """A copy of a torch policy's parameters and buffers, as NumPy arrays."""
-    return {key: value.detach().cpu().numpy().copy() for key, value in policy.state_dict().items()}
+def _train_states(policy: Any) -> dict[str, Any]:
+    """The flax train states among ``policy``'s attributes (SBX: ``actor_state``, ``qf_state``...)."""
+    try:
+        from flax.training.train_state import TrainState
+    except ImportError:
+        return {}
+    return {name: value for name, value in vars(policy).items() if isinstance(value, TrainState)}
+
+
+def copyable(policy: Any) -> bool:
+    """Whether :func:`snapshot` can take ``policy``'s parameters: torch's (SB3) or JAX train states (SBX)."""
+    return holds_torch_parameters(policy) or bool(_train_states(policy))
+
+
+def snapshot(policy: Any) -> Any:
+    """``policy``'s parameters now, for :func:`restore`: a NumPy copy of a torch policy's
+    ``state_dict``, or an SBX policy's train states themselves (JAX arrays never change)."""
+    if holds_torch_parameters(policy):
+        return {key: value.detach().cpu().numpy().copy() for key, value in policy.state_dict().items()}
+    return _train_states(policy)
+
+
+def restore(policy: Any, taken: Any) -> None:
+    """Put a :func:`snapshot` back into ``policy``."""
+    if holds_torch_parameters(policy):
+        import torch
+
+        policy.load_state_dict({key: torch.as_tensor(value) for key, value in taken.items()})
+    else:
+        for name, state in taken.items():
+            setattr(policy, name, state)
+
+
+def for_worker(policy: Any, taken: Any) -> Parameters:
+    """The arrays of a :func:`snapshot` that a copy of ``policy`` needs to act (a train state's
+    ``params`` and ``batch_stats``; its optimizer's state and functions stay here)."""
+    if holds_torch_parameters(policy):
+        return dict(taken)
+    import jax
+
+    return {
+        name: {key: jax.device_get(getattr(state, key)) for key in ("params", "batch_stats") if hasattr(state, key)}
+        for name, state in taken.items()
+    }
 
 
 def load_parameters(policy: Any, params: Parameters) -> None:
-    """Put ``params`` (from :func:`parameters`) back into ``policy``."""
-    import torch
-
-    policy.load_state_dict({key: torch.as_tensor(value) for key, value in params.items()})
+    """Give a copy of a policy the arrays :func:`for_worker` took."""
+    if holds_torch_parameters(policy):
+        restore(policy, params)
+    else:
+        for name, arrays in params.items():
+            setattr(policy, name, getattr(policy, name).replace(**arrays))
 
 
 def _worker(remote: Connection, parent: Connection, payload: CloudpickleWrapper) -> None:
@@ -62,6 +104,7 @@ def _worker(remote: Connection, parent: Connection, payload: CloudpickleWrapper)
     import torch
 
     torch.set_num_threads(1)  # as training's policy: the same arithmetic, the same actions
+    # (XLA's threads: from XLA_FLAGS, which this process inherits as training set it)
     make_env, spec = payload.var
     envs: list[Any] = []
     broken: BaseException | None = None
@@ -97,7 +140,7 @@ def _worker(remote: Connection, parent: Connection, payload: CloudpickleWrapper)
 
 
 class BackgroundValidator:
-    """Evaluations of a torch SB3 policy on envs from ``make_env``, in a worker process.
+    """Evaluations of a policy (SB3's torch or SBX's JAX) on envs from ``make_env``, in a worker process.
 
     :meth:`submit` hands it the policy's parameters (the first call a copy of the policy);
     :meth:`ready` tells whether the answer to the oldest evaluation has come, and
@@ -121,7 +164,7 @@ class BackgroundValidator:
         self.pending = 0
 
     def submit(self, policy: Any, params: Parameters) -> None:
-        """Evaluate ``policy`` with ``params`` (from :func:`parameters`)."""
+        """Evaluate ``policy`` with ``params`` (from :func:`for_worker`)."""
         self.remote.send((None if self.sent else CloudpickleWrapper(policy), params))
         self.sent = True
         self.pending += 1
@@ -156,4 +199,13 @@ class BackgroundValidator:
         self.remote.close()
 
 
-__all__ = ["BackgroundValidator", "Parameters", "holds_torch_parameters", "load_parameters", "parameters"]
+__all__ = [
+    "BackgroundValidator",
+    "Parameters",
+    "copyable",
+    "for_worker",
+    "holds_torch_parameters",
+    "load_parameters",
+    "restore",
+    "snapshot",
+]

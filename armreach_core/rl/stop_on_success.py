@@ -2,17 +2,16 @@
 
 Every ``until_success.every`` env steps, once the training success rate opens the gate,
 the policy is evaluated (:func:`~armreach_core.rl.validation.validate`). With
-``background`` (the default, for policies with torch parameters; SBX's are evaluated here)
-the evaluation runs in a worker process
+``background`` (the default) the evaluation runs in a worker process
 (:class:`~armreach_core.rl.background.BackgroundValidator`) on a copy of the policy's
 parameters while training goes on; its answer is read at the next step after it comes.
 The worker answers in order; training waits only when :data:`MAX_PENDING` evaluations are
 still unanswered at the next evaluation point. When one passes, the model gets the
 evaluated parameters and step count back and training stops: the run ends with the policy
 parameters that the same evaluation run in the training process would have stopped at, the
-same bit for bit, having spent less time. Training past that point (a second or two) is not kept:
-``checkpoint.json`` and ``validation.csv`` give the evaluated step, ``train_seconds`` the
-time the answer came.
+same bit for bit, having spent less time. Training past that point (a second or two) is not
+kept: ``checkpoint.json`` and ``validation.csv`` give the evaluated step, ``train_seconds``
+the time the answer came.
 """
 
 from __future__ import annotations
@@ -24,13 +23,7 @@ from typing import Any
 
 from stable_baselines3.common.callbacks import BaseCallback
 
-from armreach_core.rl.background import (
-    BackgroundValidator,
-    Parameters,
-    holds_torch_parameters,
-    load_parameters,
-    parameters,
-)
+from armreach_core.rl.background import BackgroundValidator, copyable, for_worker, restore, snapshot
 from armreach_core.rl.validation import BATCH, COLUMNS, VALIDATION, UntilSuccess, Validation, evaluation_envs, validate
 
 #: Evaluations asked of the worker before training waits for the oldest answer.
@@ -65,12 +58,13 @@ class StopOnSuccessCallback(BaseCallback):
         #: Seconds the training process spent evaluating, or waiting for an evaluation.
         self.seconds = 0.0
         self.worker: BackgroundValidator | None = None
-        #: The step counts and parameters of the evaluations the worker has not answered yet.
-        self.asked: list[tuple[int, Parameters]] = []
+        #: The step counts and parameters (:func:`~armreach_core.rl.background.snapshot`) of the
+        #: evaluations the worker has not answered yet.
+        self.asked: list[tuple[int, Any]] = []
 
     def _on_training_start(self) -> None:
         self.last = int(self.model.num_timesteps)
-        if self.spec.background and holds_torch_parameters(self.model.policy) and self.worker is None:
+        if self.spec.background and copyable(self.model.policy) and self.worker is None:
             self.worker = BackgroundValidator(self.make_env, self.spec)
 
     def _on_step(self) -> bool:
@@ -85,8 +79,9 @@ class StopOnSuccessCallback(BaseCallback):
                 if self._answer():
                     return False
             t0 = self.train_seconds()
-            self.asked.append((steps, parameters(self.model.policy)))
-            self.worker.submit(self.model.policy, self.asked[-1][1])
+            taken = snapshot(self.model.policy)
+            self.asked.append((steps, taken))
+            self.worker.submit(self.model.policy, for_worker(self.model.policy, taken))
             self.seconds += self.train_seconds() - t0
             return True
         if not self.envs:
@@ -116,7 +111,7 @@ class StopOnSuccessCallback(BaseCallback):
         if not result.passed:
             return False
         self.passed = result
-        load_parameters(self.model.policy, params)
+        restore(self.model.policy, params)
         self.model.num_timesteps = steps
         return True
 
