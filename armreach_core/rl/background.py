@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing
+import queue
+import threading
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
@@ -117,9 +119,24 @@ def _worker(remote: Connection, parent: Connection, payload: CloudpickleWrapper)
     def act(obs: Any) -> Any:
         return policy.predict(obs, deterministic=True)[0]
 
+    # A thread takes jobs off the pipe as they come, so that training, sending parameters
+    # larger than the pipe holds, never waits for the evaluation before them to end.
+    jobs: queue.SimpleQueue[Any] = queue.SimpleQueue()
+
+    def read() -> None:
+        try:
+            while True:
+                job = remote.recv()
+                jobs.put(job)
+                if job is None:
+                    return
+        except (EOFError, OSError):
+            jobs.put(None)
+
+    threading.Thread(target=read, daemon=True).start()
     try:
         while True:
-            job = remote.recv()
+            job = jobs.get()
             if job is None:
                 break
             try:
