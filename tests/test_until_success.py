@@ -279,6 +279,7 @@ def test_an_evaluation_worker_raises_its_envs_error_and_is_stopped_while_evaluat
     assert not busy.process.is_alive() and time.perf_counter() - t0 < 2.0
 
 
+@pytest.mark.training
 def test_sb3_and_sbx_policies_are_copied_to_a_worker_by_what_holds_their_parameters() -> None:
     """SBX's JAX policies are torch modules without torch parameters: copied as torch modules, a
     worker would evaluate their first parameters forever; their train states travel instead."""
