@@ -15,7 +15,8 @@ one JSON line per request on the stdout it was started with:
 Warnings are errors, as under pytest. A segmentation fault or a hang ends or stalls this
 process, which the test sees from outside. The reach task's reachability map is drawn from
 :data:`MAP_SAMPLES` poses instead of its 120 000: the map's precision is not under test here,
-and it is most of the time an env takes to build.
+and it is most of the time an env takes to build. An arm refused because that coarse map
+holds no interior voxel is built again with the full map before the answer.
 """
 
 from __future__ import annotations
@@ -77,6 +78,28 @@ def _build(request: dict[str, Any]) -> dict[str, str]:
     return {"outcome": "ok", "detail": ",".join(built)}
 
 
+#: The refusal of an arm whose map holds no interior voxel, which the coarse map may give alone.
+NO_TARGETS = "so it has no targets to reach"
+
+
+def _with_full_map(request: dict[str, Any], samples: int) -> dict[str, str]:
+    """``request`` built again with the map's own ``samples``: the coarse map's precision is not
+    under test, and an arm that barely reaches above the ground may leave it empty."""
+    from armreach_core.robot import workspace
+
+    def forget() -> None:
+        workspace.reachability_map.cache_clear()
+        workspace._clear_voxels.cache_clear()
+
+    workspace.SAMPLES = samples
+    forget()
+    try:
+        return _build(request)
+    finally:
+        workspace.SAMPLES = MAP_SAMPLES
+        forget()
+
+
 def main() -> None:
     _hide_modules()
     warnings.simplefilter("error")
@@ -87,8 +110,8 @@ def main() -> None:
     import armreach_core  # noqa: F401 - load the plugins once, before the first request
     from armreach_core.robot import workspace
 
-    assert workspace.ReachabilityMap.__init__.__defaults__ == (workspace.VOXEL, workspace.SAMPLES)
-    workspace.ReachabilityMap.__init__.__defaults__ = (workspace.VOXEL, MAP_SAMPLES)
+    full = workspace.SAMPLES
+    workspace.SAMPLES = MAP_SAMPLES  # the maps' cache key says so too: they never pass for full ones
 
     protocol.write(json.dumps({"outcome": "ready"}) + "\n")
     protocol.flush()
@@ -96,6 +119,8 @@ def main() -> None:
         request = json.loads(line)
         try:
             answer = _build(request)
+            if answer["outcome"] == "refused" and NO_TARGETS in answer.get("detail", ""):
+                answer = _with_full_map(request, full)
         except Exception:
             answer = {"outcome": "error", "detail": traceback.format_exc(limit=6)}
         protocol.write(json.dumps(answer) + "\n")

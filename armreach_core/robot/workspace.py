@@ -148,7 +148,7 @@ def reachability_map(robot: RobotModel) -> ReachabilityMap:
     stored = map_cache.load(robot, key)
     if stored is not None:
         return ReachabilityMap.from_arrays(stored)
-    built = ReachabilityMap(robot)
+    built = ReachabilityMap(robot, VOXEL, SAMPLES)  # what the key says, whatever the defaults
     map_cache.store(robot, key, built.arrays())
     return built
 
