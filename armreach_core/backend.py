@@ -39,14 +39,13 @@ class PhysicsConfig:
         self_collision: collide non-adjacent links of the arm with each other (default off).
         inertia_from_file: use the URDF's inertia tensors (default on), not the engine's guesses.
         ground: add a static ground plane at z = 0 that collides with the arm.
-        visuals: load the URDF's visual meshes (default on); an env that never renders
-            (``render_mode=None``) turns them off, and a backend may then skip them to save
-            memory. Physics is the same either way.
-        engine_drag: keep the drag an engine puts on every moving link, which no URDF states
-            (PyBullet's 0.04; MuJoCo has none).
+        visuals: load the URDF's visual meshes (default on; off in an env that never renders, where
+            a backend may skip them to save memory). Physics is the same either way.
+        engine_drag: keep the drag an engine puts on every moving link (PyBullet's 0.04), no URDF's.
         iterative_solver: solve motors and contacts iteratively (PyBullet: Gauss-Seidel instead
             of its direct Dantzig solver; MuJoCo: no change). Both on: the dynamics of the ids
             before ``Reach-v2`` (``Reach-v0``/``v1``, ``Grasp-v0``, ``ReachAround-v0``).
+        merge_fixed_links: load a link fixed to another as part of it (PyBullet: faster, the same bodies).
     """
 
     timestep: float = 1.0 / 240.0
@@ -58,6 +57,7 @@ class PhysicsConfig:
     visuals: bool = True
     engine_drag: bool = False
     iterative_solver: bool = False
+    merge_fixed_links: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.timestep) and 0.0 < self.timestep <= 0.1):

@@ -73,16 +73,15 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         joint_limit_penalty: subtracted from the reward on each step whose target left the
             joint limits, default 0 (the paper's reward). Training shaping: a policy trained
             with clipping and a penalty also keeps within the limits under the paper's rule.
-        self_collision, inertia_from_file, engine_drag, iterative_solver: see
-            :class:`~armreach_core.backend.PhysicsConfig` (both ``True``: the dynamics of older env ids).
+        self_collision, inertia_from_file, engine_drag, iterative_solver, merge_fixed_links:
+            :class:`~armreach_core.backend.PhysicsConfig`'s (older ids: see ``deprecated_ids``).
         camera: a :class:`~armreach_core.backend.Camera` for rendering.
         tool_joints: joints off the arm's chain to actuate too (a gripper's fingers);
             default the registered robot's (none for a ``urdf``).
         allow_external_meshes: let ``urdf`` use meshes outside its folder or ROS package
             (default: the ``ARMREACH_ALLOW_EXTERNAL_MESHES`` environment variable, else no).
         base_position: the root link in the world, ``(x, y, z)`` in m, default the origin (observations: world frame).
-        base_orientation: the root link's orientation, a quaternion ``(w, x, y, z)``
-            (normalized); default no rotation.
+        base_orientation: the root link's orientation, a quaternion ``(w, x, y, z)``, default no rotation.
         package_dirs: where ROS packages live, ``{name: folder}``, for ``$(find NAME)`` and
             ``package://NAME/...`` (also ``ROS_PACKAGE_PATH``); their files may be read.
         xacro_args: arguments of a xacro ``urdf``, ``{name: value}``.
@@ -90,11 +89,10 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         arm: the arm as one :class:`~armreach_core.robot.spec.ArmSpec`, instead of ``urdf``,
             ``robot``, ``ee_link``, ``home``, ``tool_joints``, ``base_position``,
             ``base_orientation`` and ``allow_external_meshes``.
-        physics: a physics profile (a YAML path or a
-            :class:`~armreach_core.sim2real.profile.PhysicsProfile`, e.g. from ``armreach sysid``):
-            its per-joint damping, friction and effort replace the URDF's, and its latency
-            delays each joint target by that many control steps (the arm holds its reset pose
-            until the first arrives). Default none: the URDF's dynamics, no latency.
+        physics: a physics profile (a YAML path or a :class:`~armreach_core.sim2real.profile.PhysicsProfile`,
+            e.g. from ``armreach sysid``): its per-joint damping, friction and effort replace the URDF's, and its
+            latency delays each joint target by that many control steps (the arm holds its reset pose until the
+            first arrives). Default none: the URDF's dynamics, no latency.
         **task_options: passed to the task.
     """
 
@@ -120,6 +118,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         inertia_from_file: bool = True,
         engine_drag: bool = False,
         iterative_solver: bool = False,
+        merge_fixed_links: bool = True,
         camera: Camera | None = None,
         tool_joints: tuple[str, ...] | list[str] | None = None,
         allow_external_meshes: bool | None = None,
@@ -186,6 +185,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             visuals=render_mode is not None,
             engine_drag=engine_drag,
             iterative_solver=iterative_solver,
+            merge_fixed_links=merge_fixed_links,
         )
         self.camera = camera or Camera()
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.physics.control_dt)}

@@ -196,9 +196,9 @@ def _pybullet_joints(world: Any) -> dict[str, int]:
 def _held_state(world: Any, robot: Any) -> np.ndarray:
     """Positions of joints the backend does not report (held joints), read from the engine.
 
-    PyBullet welds a held joint that follows no actuated joint where it is held: its
-    position is read from the pose of its child link relative to its parent's, which is
-    where the joint puts it.
+    PyBullet welds a held joint that follows no actuated joint where it is held, and merges
+    its child into its parent: its position is read from the pose of its child link's frame
+    relative to its parent's, which is where the joint puts it.
     """
     names = [j.name for j in robot.held_joints]
     if world.name == "pybullet":
@@ -208,17 +208,17 @@ def _held_state(world: Any, robot: Any) -> np.ndarray:
         index = _pybullet_joints(world)
         out = []
         for joint in robot.held_joints:
-            info = pb.getJointInfo(body, index[joint.name], physicsClientId=cid)
-            if info[2] != pb.JOINT_FIXED:
-                out.append(pb.getJointState(body, index[joint.name], physicsClientId=cid)[0])
+            i = index.get(joint.name)
+            if i is not None and pb.getJointInfo(body, i, physicsClientId=cid)[2] != pb.JOINT_FIXED:
+                out.append(pb.getJointState(body, i, physicsClientId=cid)[0])
             else:
-                out.append(_welded_position(world, robot, joint.name, info[16]))
+                out.append(_welded_position(world, robot, joint.name))
         return np.array(out)
     model, data = world.model, world.data
     return np.array([data.qpos[model.jnt_qposadr[model.joint(n).id]] for n in names])
 
 
-def _welded_position(world: Any, robot: Any, name: str, parent: int) -> float:
+def _welded_position(world: Any, robot: Any, name: str) -> float:
     """The position of welded joint ``name``: its child's frame seen from its parent's, against
     the URDF's forward kinematics with the joint at 0 and moved along its axis."""
     import pybullet as pb
@@ -226,20 +226,21 @@ def _welded_position(world: Any, robot: Any, name: str, parent: int) -> float:
     body, cid = world.body, world.client
     joint = robot.parsed.model.joint_map[name]
 
-    def frame(link: int) -> np.ndarray:
-        if link < 0:  # the root link's frame: its centre of mass's, less the inertial offset
+    def frame(link: str) -> np.ndarray:
+        index = world.link_index(link)
+        if index < 0:  # the root link's frame: its centre of mass's, less the inertial offset
             com = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
             inertial = pb.getDynamicsInfo(body, -1, physicsClientId=cid)[3:5]
             position, orientation = pb.multiplyTransforms(*com, *pb.invertTransform(*inertial))
         else:
-            position, orientation = pb.getLinkState(body, link, computeForwardKinematics=True, physicsClientId=cid)[4:6]
+            state = pb.getLinkState(body, index, computeForwardKinematics=True, physicsClientId=cid)
+            position, orientation = state[4:6]
         out = np.eye(4)
         out[:3, :3] = np.array(pb.getMatrixFromQuaternion(orientation)).reshape(3, 3)
         out[:3, 3] = position
-        return out
+        return out @ world._merged.offset[link]  # a link merged into another: that one's frame, moved
 
-    child = _pybullet_joints(world)[name]
-    relative = np.linalg.inv(frame(parent)) @ frame(child)  # origin @ motion along the axis
+    relative = np.linalg.inv(frame(str(joint.parent))) @ frame(str(joint.child))  # origin @ motion along the axis
     motion = np.linalg.inv(joint.origin if joint.origin is not None else np.eye(4)) @ relative
     axis = np.asarray(joint.axis, dtype=float) / np.linalg.norm(joint.axis)
     if joint.type == "prismatic":
@@ -258,7 +259,7 @@ def _disturb(world: Any, names: list[str], value: float) -> None:
 
         index = _pybullet_joints(world)
         for n in names:
-            if pb.getJointInfo(world.body, index[n], physicsClientId=world.client)[2] != pb.JOINT_FIXED:
+            if n in index and pb.getJointInfo(world.body, index[n], physicsClientId=world.client)[2] != pb.JOINT_FIXED:
                 pb.resetJointState(world.body, index[n], value, 0.3, physicsClientId=world.client)
         return
     model, data = world.model, world.data

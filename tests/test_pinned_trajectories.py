@@ -140,11 +140,16 @@ def test_seeded_trajectories_stay_identical(backend: str, seed: int) -> None:
 @pytest.mark.skipif("pybullet" not in BACKENDS, reason="PyBullet is not installed")
 @pytest.mark.parametrize("seed", SEEDS)
 def test_engine_drag_gives_the_dynamics_of_the_older_ids_bit_for_bit(seed: int) -> None:
-    """``engine_drag=True, iterative_solver=True`` (``Reach-v1``) reproduces PyBullet's trajectories
-    as they were pinned before its links lost their drag and its solver became the direct one;
-    without them they differ, and the drag alone does not reproduce them."""
+    """``engine_drag=True, iterative_solver=True, merge_fixed_links=False`` (``Reach-v1``)
+    reproduces PyBullet's trajectories as they were pinned before its links lost their drag, its
+    solver became the direct one and fixed links were merged; without them they differ, and the
+    drag alone does not reproduce them."""
+    from armreach_core.plugins.lookup import task_spec
+
+    older = task_spec("reach").deprecated_ids["armreach/Reach-v1"]
+    assert older == {"engine_drag": True, "iterative_solver": True, "merge_fixed_links": False}
     want = json.loads(ENGINE_DRAG_PINNED.read_text())[f"pybullet/{seed}"]
-    got = trajectory("pybullet", seed, engine_drag=True, iterative_solver=True)
+    got = trajectory("pybullet", seed, **older)
     assert got["ends"] == want["ends"]
     np.testing.assert_array_equal(got["observations"], want["observations"])
     np.testing.assert_array_equal(got["rewards"], want["rewards"])

@@ -24,8 +24,13 @@ def armreach_register_tasks(register: Register) -> None:
             name=DEFAULT_TASK,
             env_id="armreach/Reach-v2",
             deprecated_ids={
-                "armreach/Reach-v0": {"targets_clear_of_arm": False, "engine_drag": True, "iterative_solver": True},
-                "armreach/Reach-v1": {"engine_drag": True, "iterative_solver": True},
+                "armreach/Reach-v0": {
+                    "targets_clear_of_arm": False,
+                    "engine_drag": True,
+                    "iterative_solver": True,
+                    "merge_fixed_links": False,
+                },
+                "armreach/Reach-v1": {"engine_drag": True, "iterative_solver": True, "merge_fixed_links": False},
             },
             load="armreach_core.tasks.reach.task:ReachTask",
             robot=DEFAULT_ROBOT,

@@ -25,6 +25,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
+from trimesh.transformations import quaternion_from_matrix
 
 from armreach_core.backend import NO_OBJECTS, ArmState, Backend, BodyState, Camera, PhysicsConfig, shape_size
 from armreach_core.errors import ArmReachError, ConfigError
@@ -67,8 +68,8 @@ class PyBulletBackend(Backend):
     def _build(self) -> None:
         cid, robot = self._client, self.robot
         build_world(cid, self.physics)
-        self._body, self._base_pose = load_robot(cid, robot, self.physics)
-        layout = read_layout(cid, self._body, robot)
+        self._body, self._base_pose, self._merged = load_robot(cid, robot, self.physics)
+        layout = read_layout(cid, self._body, robot, self._merged)
         self._link_index = layout.link_index
         self._joints = layout.joints
         self._held, self._held_slots = layout.held, layout.held_slots
@@ -76,12 +77,14 @@ class PyBulletBackend(Backend):
         # URDF dampings, as loaded (PyBullet does not report a changed one back)
         self._damping = {j.name: float(j.damping) for j in robot.joints}
         self._nominal_inertia: dict[str, tuple[float, list[float]]] = {}
+        self._own_mass: dict[str, float] = {}  # masses of merged links, as set
         self._ee = self._link_index[robot.ee_link]
+        self._ee_offset = self._offset(robot.ee_link)
         self._motors = Motors(cid, self._body, robot, layout)
         for name, value in bound_damping(cid, self._body, robot, self._motors, self.physics.timestep).items():
             if name in self._damping:
                 self._damping[name] = value
-        self._world = World(cid, robot, self._body, self._link_index)
+        self._world = World(cid, robot, self._body, self._link_index, self._merged.colliding)
         self._friction = JointFriction(cid, self._body, self._joints)
 
     # -- engine handles (for probes and tests; read-only) ---------------------------------
@@ -151,15 +154,29 @@ class PyBulletBackend(Backend):
         if self._world.free or self._ee < 0:
             return super().read_state()
         q, qd = self.joint_state()
-        ee = pb.getLinkState(self._body, self._ee, computeForwardKinematics=True, physicsClientId=self._client)[4]
+        state = pb.getLinkState(self._body, self._ee, computeForwardKinematics=True, physicsClientId=self._client)
+        ee = state[4] if self._ee_offset is None else pb.multiplyTransforms(state[4], state[5], *self._ee_offset)[0]
         return ArmState(q, qd, np.array(ee), NO_OBJECTS)
 
     def link_position(self, link: str) -> FloatArray:
-        index = self.link_index(link)
+        index, offset = self.link_index(link), self._offset(link)
         if index < 0:  # the root link's frame (PyBullet's base position is its centre of mass)
-            return np.array(self._base_pose[0], dtype=np.float64)
-        state = pb.getLinkState(self._body, index, computeForwardKinematics=True, physicsClientId=self._client)
-        return np.array(state[4])
+            frame = self._base_pose
+        else:
+            state = pb.getLinkState(self._body, index, computeForwardKinematics=True, physicsClientId=self._client)
+            frame = (list(state[4]), list(state[5]))
+        if offset is not None:
+            return np.array(pb.multiplyTransforms(*frame, *offset)[0])
+        return np.array(frame[0], dtype=np.float64)
+
+    def _offset(self, link: str) -> tuple[list[float], list[float]] | None:
+        """A merged link's frame in its owner's link frame, as PyBullet's (position, xyzw quaternion);
+        ``None`` for a link PyBullet kept (armreach_pybullet.merge)."""
+        if self._merged.owner[link] == link:
+            return None
+        matrix = self._merged.offset[link]
+        w, x, y, z = quaternion_from_matrix(matrix)  # type: ignore[no-untyped-call]
+        return [float(v) for v in matrix[:3, 3]], [float(x), float(y), float(z), float(w)]
 
     # -- bodies, contacts, friction (armreach_pybullet.world) ------------------------------
     def add_box(
@@ -227,18 +244,35 @@ class PyBulletBackend(Backend):
             raise ArmReachError(f"joint {joint!r} is not an actuated joint of {self.robot.name!r}") from None
 
     def link_mass(self, link: str) -> float:
-        return float(pb.getDynamicsInfo(self._body, self.link_index(link), physicsClientId=self._client)[0])
+        index, merged = self.link_index(link), self._merged
+        if index >= 0 and len(merged.members(merged.owner[link])) > 1:  # a part of a merged body: its own mass
+            return self._own_mass.get(link, merged.mass[link])
+        return float(pb.getDynamicsInfo(self._body, index, physicsClientId=self._client)[0])
 
     def set_link_mass(self, link: str, mass: float) -> None:
-        index, cid = self.link_index(link), self._client
-        if link not in self._nominal_inertia:
-            info = pb.getDynamicsInfo(self._body, index, physicsClientId=cid)
-            self._nominal_inertia[link] = (float(info[0]), list(info[2]))
-        nominal_mass, inertia = self._nominal_inertia[link]
+        """Set ``link``'s mass, its inertia scaled with it; a part of a merged body changes the
+        body's mass by as much, and the body's inertia in proportion (its centre of mass stays)."""
+        index, cid, merged = self.link_index(link), self._client, self._merged
+        owner = merged.owner[link]
+        members = merged.members(owner)
+        if len(members) > 1:
+            self._own_mass[link] = float(mass)
+            if index < 0:  # welded to the fixed base: nothing it carries moves
+                return
+            mass = sum(self._own_mass.get(m, merged.mass[m]) - merged.mass[m] for m in members)
+            mass += self._nominal(owner, index)[0]
+        nominal_mass, inertia = self._nominal(owner, index)
         ratio = float(mass) / nominal_mass if nominal_mass > 0 else 1.0
         pb.changeDynamics(
             self._body, index, mass=float(mass), localInertiaDiagonal=[i * ratio for i in inertia], physicsClientId=cid
         )
+
+    def _nominal(self, owner: str, index: int) -> tuple[float, list[float]]:
+        """The mass and inertia diagonal PyBullet loaded for link ``owner`` (at ``index``)."""
+        if owner not in self._nominal_inertia:
+            info = pb.getDynamicsInfo(self._body, index, physicsClientId=self._client)
+            self._nominal_inertia[owner] = (float(info[0]), list(info[2]))
+        return self._nominal_inertia[owner]
 
     def joint_damping(self, joint: str) -> float:
         self._actuator(joint)

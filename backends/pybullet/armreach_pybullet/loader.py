@@ -11,6 +11,7 @@ from armreach_core.robot.hulls import simulation_urdf
 from armreach_core.robot.meshes import readable
 from armreach_core.robot.model import RobotModel
 from armreach_pybullet.engine import engine_output_to_log, pb
+from armreach_pybullet.merge import Merged, merge_fixed, unmerged
 from armreach_pybullet.weld import weld
 
 #: Sweeps of Bullet's projected Gauss-Seidel solver per physics step (PyBullet's default is 50).
@@ -67,11 +68,13 @@ def build_world(cid: int, physics: PhysicsConfig) -> None:
         pb.createMultiBody(0.0, shape, visual, basePosition=[0, 0, 0], physicsClientId=cid)
 
 
-def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int, Pose]:
-    """Load ``robot`` into client ``cid`` at its base pose, with a fixed base: its body id and that pose.
+def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int, Pose, Merged]:
+    """Load ``robot`` into client ``cid`` at its base pose, with a fixed base: its body id, that
+    pose, and where its links went.
 
     Held joints that follow no actuated joint are welded at their hold positions
-    (:mod:`armreach_pybullet.weld`).
+    (:mod:`armreach_pybullet.weld`), and links fixed to another are merged into it
+    (:mod:`armreach_pybullet.merge`).
 
     Raises:
         URDFError: PyBullet refused the URDF (the client is then disconnected).
@@ -87,6 +90,7 @@ def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int
         path = os.path.join(tmp, "robot.urdf")
         with open(path, "wb") as handle:
             urdf = weld(simulation_urdf(robot, visuals=physics.visuals), robot)
+            urdf, merged = merge_fixed(urdf) if physics.merge_fixed_links else (urdf, unmerged(urdf))
             handle.write(readable(urdf, PYBULLET_MESHES))
         try:
             with engine_output_to_log():
@@ -108,7 +112,7 @@ def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int
     # applies none, so the arm gets none (see LINK_DRAG)
     if not physics.engine_drag:  # else Bullet's own default stays, bit for bit (a float 0.04)
         pb.changeDynamics(body, -1, linearDamping=LINK_DRAG, angularDamping=LINK_DRAG, physicsClientId=cid)
-    return int(body), base_pose
+    return int(body), base_pose, merged
 
 
 __all__ = [

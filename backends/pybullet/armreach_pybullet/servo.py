@@ -20,6 +20,7 @@ from armreach_core.errors import ArmReachError
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.robot.statics import joint_inertias
 from armreach_pybullet.engine import engine_output_to_log, pb
+from armreach_pybullet.merge import Merged
 from armreach_pybullet.weld import welded_joints
 
 log = logging.getLogger("armreach.pybullet")
@@ -34,7 +35,8 @@ class Layout:
 
     Attributes:
         joint_index: joint index by URDF joint name, every joint of the body.
-        link_index: link index by URDF link name (-1: the root link).
+        link_index: link index by URDF link name (-1: the root link); a merged link has the
+            index of the link it is part of.
         joints: the actuated joints, in ``robot.joint_names`` order.
         held: the held joints that still move (not welded), in ``robot.held_joints`` order.
         held_slots: the place of each of ``held`` in ``robot.held_joints``.
@@ -47,11 +49,12 @@ class Layout:
     held_slots: list[int]
 
 
-def read_layout(cid: int, body: int, robot: RobotModel) -> Layout:
-    """The indices of ``robot``'s joints and links in PyBullet body ``body``.
+def read_layout(cid: int, body: int, robot: RobotModel, merged: Merged) -> Layout:
+    """The indices of ``robot``'s joints and links in PyBullet body ``body``, every link merged
+    into another (``merged``) at the index of the link it is part of.
 
     Raises:
-        ArmReachError: PyBullet did not create an actuated or held joint.
+        ArmReachError: PyBullet did not create an actuated or held joint, or a link.
     """
     joint_index: dict[str, int] = {}
     link_index: dict[str, int] = {pb.getBodyInfo(body, physicsClientId=cid)[0].decode(): -1}
@@ -60,11 +63,15 @@ def read_layout(cid: int, body: int, robot: RobotModel) -> Layout:
         joint_index[info[1].decode()] = i
         link_index[info[12].decode()] = i
     held = robot.held_joints
-    missing = [name for name in (*robot.joint_names, *(j.name for j in held)) if name not in joint_index]
-    if missing:
-        raise ArmReachError(f"PyBullet did not create joints {missing} of {robot.urdf_path}")
     welded = welded_joints(robot)
     slots = [i for i, j in enumerate(held) if j.name not in welded]
+    moving = (*robot.joint_names, *(held[i].name for i in slots))
+    missing = [name for name in moving if name not in joint_index]
+    lost = [link for link, owner in merged.owner.items() if owner not in link_index]
+    if missing or lost:
+        raise ArmReachError(f"PyBullet did not create joints {missing} or links {lost} of {robot.urdf_path}")
+    for link, owner in merged.owner.items():
+        link_index[link] = link_index[owner]
     return Layout(
         joint_index=joint_index,
         link_index=link_index,

@@ -15,10 +15,18 @@ PARKING = (0.0, 0.0, 1.0e4)
 
 
 class World:
-    """The boxes and markers of one client, and the contacts of its robot body, all by name."""
+    """The boxes and markers of one client, and the contacts of its robot body, all by name.
 
-    def __init__(self, cid: int, robot: RobotModel, body: int, link_index: dict[str, int]) -> None:
+    ``link_index`` gives each link's PyBullet index (that of the body it was merged into,
+    :mod:`armreach_pybullet.merge`); contacts and clearances are those of the links in
+    ``colliding``, the links with collision geometry.
+    """
+
+    def __init__(
+        self, cid: int, robot: RobotModel, body: int, link_index: dict[str, int], colliding: frozenset[str]
+    ) -> None:
         self._client, self._robot, self._body, self._link_index = cid, robot, body, link_index
+        self._colliding = colliding
         self._markers: dict[str, int] = {}
         self._bodies: dict[str, int] = {}
         #: The bodies with mass, in the order they were added.
@@ -90,18 +98,24 @@ class World:
         cid, robot, own = self._client, self._robot, self._body
         ids = [self._body_id(name) for name in bodies]
         out: dict[str, FloatArray] = {}
+        found: dict[int, FloatArray] = {}  # by PyBullet link: the parts of a merged body share it
         for link in robot.link_names:
             index = self._link_index.get(link)
             if link in robot.fixed_links or index is None:
                 continue
-            values = np.full(len(ids), float(max_distance))
-            for k, body in enumerate(ids):
-                points = pb.getClosestPoints(
-                    own, body, float(max_distance), linkIndexA=index, linkIndexB=-1, physicsClientId=cid
-                )
-                if points:
-                    values[k] = min(values[k], min(float(point[8]) for point in points))
-            out[link] = values
+            if link not in self._colliding:
+                out[link] = np.full(len(ids), float(max_distance))
+                continue
+            if index not in found:
+                values = np.full(len(ids), float(max_distance))
+                for k, body in enumerate(ids):
+                    points = pb.getClosestPoints(
+                        own, body, float(max_distance), linkIndexA=index, linkIndexB=-1, physicsClientId=cid
+                    )
+                    if points:
+                        values[k] = min(values[k], min(float(point[8]) for point in points))
+                found[index] = values
+            out[link] = found[index].copy()
         return out
 
     def _body_id(self, name: str) -> int:
@@ -153,9 +167,11 @@ class World:
                     touching.add(point[3])
                 if point[2] == body:
                     touching.add(point[4])
-        index, robot = self._link_index, self._robot
+        index, robot, colliding = self._link_index, self._robot, self._colliding
         return tuple(
-            link for link in robot.link_names if link not in robot.fixed_links and index.get(link, -2) in touching
+            link
+            for link in robot.link_names
+            if link in colliding and link not in robot.fixed_links and index.get(link, -2) in touching
         )
 
     def set_friction(self, name: str, friction: float) -> None:

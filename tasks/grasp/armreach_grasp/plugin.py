@@ -30,7 +30,9 @@ def armreach_register_tasks(register: Register) -> None:
         TaskSpec(
             name="grasp",
             env_id="armreach/Grasp-v1",
-            deprecated_ids={"armreach/Grasp-v0": {"engine_drag": True, "iterative_solver": True}},
+            deprecated_ids={
+                "armreach/Grasp-v0": {"engine_drag": True, "iterative_solver": True, "merge_fixed_links": False}
+            },
             load="armreach_grasp.task:GraspTask",
             robot=ROBOT,
             max_episode_steps=100,

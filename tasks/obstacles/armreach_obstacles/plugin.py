@@ -24,7 +24,9 @@ def armreach_register_tasks(register: Register) -> None:
         TaskSpec(
             name="reach-around",
             env_id="armreach/ReachAround-v1",
-            deprecated_ids={"armreach/ReachAround-v0": {"engine_drag": True, "iterative_solver": True}},
+            deprecated_ids={
+                "armreach/ReachAround-v0": {"engine_drag": True, "iterative_solver": True, "merge_fixed_links": False}
+            },
             load="armreach_obstacles.task:ReachAroundTask",
             max_episode_steps=MAX_EPISODE_STEPS,
             entry_point="armreach_obstacles.env:ArmReachAroundEnv",
