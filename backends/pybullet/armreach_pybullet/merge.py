@@ -1,12 +1,13 @@
-"""Links fixed to another, merged into it when PyBullet loads the arm (``URDF_MERGE_FIXED_LINKS``).
+"""Links fixed to another, merged into it in the URDF PyBullet loads.
 
 Every link of a Bullet multibody costs each physics step its share of the kinematics, the
 dynamics recursion and collision detection, whether its joint moves or not. A link fixed to
 another (a ``tool0`` frame, a force-torque sensor's flange, a gripper's fixed fingers, the
-child of a welded held joint) moves with it as one rigid body, so PyBullet merges it into
-the link it hangs from: masses, inertias and collision shapes are combined, which is exact
-for a rigid body. On the corpus this takes the env step 10-35 % faster, more on arms with
-detailed grippers (docs/benchmarks.md, "Detailed and heavy arms").
+child of a welded held joint) moves with it as one rigid body, so it is folded into the link
+it hangs from before PyBullet reads the URDF (:func:`merge_fixed`): its visuals and
+collisions move there, its mass and inertia are added about the common centre of mass,
+which is exact for a rigid body. The corpus arms step 1.1-1.7 times as fast, most those with
+detailed grippers (docs/benchmarks.md, "Links fixed to another, merged").
 
 Armreach still addresses every link by its URDF name (:class:`Merged`): a merged link's pose
 is its owner's link frame times the fixed offset between them; its contacts and clearances
