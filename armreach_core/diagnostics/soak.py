@@ -173,6 +173,9 @@ def _cycles(backend: str, cycles: int, seed: int, progress: Callable[[str], None
         for _ in range(5):
             env.step(rng.uniform(-1.0, 1.0, env.robot.dof))
         env.close()
+        # what a closed env leaves in reference cycles goes now, not when Python's collector next
+        # runs: without this, RSS climbed 2.7 MB over the first 90 cycles and stayed there
+        gc.collect()
 
     clients_before = live_clients() if live_clients is not None else None
     warmup = min(max(cycles // 10, 1), 20)

@@ -245,7 +245,8 @@ class PyBulletBackend(Backend):
 
     def link_mass(self, link: str) -> float:
         index, merged = self.link_index(link), self._merged
-        if index >= 0 and len(merged.members(merged.owner[link])) > 1:  # a part of a merged body: its own mass
+        owner = merged.owner[link]
+        if link != owner or (index >= 0 and len(merged.members(owner)) > 1):  # a part of a merged body: its own
             return self._own_mass.get(link, merged.mass[link])
         return float(pb.getDynamicsInfo(self._body, index, physicsClientId=self._client)[0])
 

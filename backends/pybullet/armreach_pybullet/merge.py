@@ -173,7 +173,8 @@ def merge_fixed(urdf: bytes) -> tuple[bytes, Merged]:
 
 
 def merged_links(urdf: bytes) -> Merged:
-    """How PyBullet merges the fixed links of ``urdf`` (the arm as it is loaded, held joints welded)."""
+    """Which link each link of ``urdf`` (the arm as PyBullet loads it, held joints welded) is
+    part of once :func:`merge_fixed` has merged the links fixed to another, and where."""
     root = etree.fromstring(urdf)
     above = {str(j.find("child").get("link")): j for j in root.findall("joint")}  # type: ignore[union-attr]
     owner: dict[str, str] = {}

@@ -119,8 +119,12 @@ def test_a_merged_arm_moves_as_the_unmerged_one_and_its_links_keep_their_frames(
 def test_a_merged_links_mass_is_its_own_and_changing_it_changes_its_body(tooled: Path) -> None:
     import pybullet as pb
 
-    _, world = _world(tooled, True)
+    robot, world = _world(tooled, True)
+    _, plain = _world(tooled, False)
     try:
+        # every link reports the mass the unmerged arm gives it (a robustness study draws the same links)
+        for link in robot.link_names:
+            assert world.link_mass(link) == pytest.approx(plain.link_mass(link)), link
         wrist = world.link_index("wrist_3_link")
         assert world.link_index("tool_body") == world.link_index("tool_centre") == wrist
         body_mass = pb.getDynamicsInfo(world.body, wrist, physicsClientId=world.client)[0]
@@ -135,6 +139,7 @@ def test_a_merged_links_mass_is_its_own_and_changing_it_changes_its_body(tooled:
         assert pb.getDynamicsInfo(world.body, wrist, physicsClientId=world.client)[0] == pytest.approx(body_mass)
     finally:
         world.close()
+        plain.close()
 
 
 def test_contacts_and_clearances_of_a_merged_body_are_its_colliding_links(tooled: Path) -> None:
