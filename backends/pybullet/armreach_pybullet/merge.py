@@ -6,8 +6,8 @@ another (a ``tool0`` frame, a force-torque sensor's flange, a gripper's fixed fi
 child of a welded held joint) moves with it as one rigid body, so it is folded into the link
 it hangs from before PyBullet reads the URDF (:func:`merge_fixed`): its visuals and
 collisions move there, its mass and inertia are added about the common centre of mass,
-which is exact for a rigid body. The corpus arms step 1.1-1.7 times as fast, most those with
-detailed grippers (docs/benchmarks.md, "Links fixed to another, merged").
+which is exact for a rigid body. Arms with detailed grippers step 1.4-1.7 times as fast, ar6
+1.11 times (docs/benchmarks.md, "Links fixed to another, merged").
 
 Armreach still addresses every link by its URDF name (:class:`Merged`): a merged link's pose
 is its owner's link frame times the fixed offset between them; its contacts and clearances
