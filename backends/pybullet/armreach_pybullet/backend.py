@@ -79,7 +79,11 @@ class PyBulletBackend(Backend):
         self._nominal_inertia: dict[str, tuple[float, list[float]]] = {}
         self._own_mass: dict[str, float] = {}  # masses of merged links, as set
         self._ee = self._link_index[robot.ee_link]
-        self._ee_offset = self._offset(robot.ee_link)
+        # each merged link's frame in its owner's link frame, as PyBullet's (position, xyzw quaternion)
+        self._offsets = {
+            link: _pose(self._merged.offset[link]) for link, owner in self._merged.owner.items() if owner != link
+        }
+        self._ee_offset = self._offsets.get(robot.ee_link)
         self._motors = Motors(cid, self._body, robot, layout)
         for name, value in bound_damping(cid, self._body, robot, self._motors, self.physics.timestep).items():
             if name in self._damping:
@@ -159,7 +163,7 @@ class PyBulletBackend(Backend):
         return ArmState(q, qd, np.array(ee), NO_OBJECTS)
 
     def link_position(self, link: str) -> FloatArray:
-        index, offset = self.link_index(link), self._offset(link)
+        index, offset = self.link_index(link), self._offsets.get(link)
         if index < 0:  # the root link's frame (PyBullet's base position is its centre of mass)
             frame = self._base_pose
         else:
@@ -168,15 +172,6 @@ class PyBulletBackend(Backend):
         if offset is not None:
             return np.array(pb.multiplyTransforms(*frame, *offset)[0])
         return np.array(frame[0], dtype=np.float64)
-
-    def _offset(self, link: str) -> tuple[list[float], list[float]] | None:
-        """A merged link's frame in its owner's link frame, as PyBullet's (position, xyzw quaternion);
-        ``None`` for a link PyBullet kept (armreach_pybullet.merge)."""
-        if self._merged.owner[link] == link:
-            return None
-        matrix = self._merged.offset[link]
-        w, x, y, z = quaternion_from_matrix(matrix)  # type: ignore[no-untyped-call]
-        return [float(v) for v in matrix[:3, 3]], [float(x), float(y), float(z), float(w)]
 
     # -- bodies, contacts, friction (armreach_pybullet.world) ------------------------------
     def add_box(
@@ -260,20 +255,16 @@ class PyBulletBackend(Backend):
             self._own_mass[link] = float(mass)
             if index < 0:  # welded to the fixed base: nothing it carries moves
                 return
-            mass = sum(self._own_mass.get(m, merged.mass[m]) - merged.mass[m] for m in members)
-            mass += self._nominal(owner, index)[0]
-        nominal_mass, inertia = self._nominal(owner, index)
+        if owner not in self._nominal_inertia:  # the mass and inertia diagonal PyBullet loaded
+            info = pb.getDynamicsInfo(self._body, index, physicsClientId=cid)
+            self._nominal_inertia[owner] = (float(info[0]), list(info[2]))
+        nominal_mass, inertia = self._nominal_inertia[owner]
+        if len(members) > 1:
+            mass = nominal_mass + sum(self._own_mass.get(m, merged.mass[m]) - merged.mass[m] for m in members)
         ratio = float(mass) / nominal_mass if nominal_mass > 0 else 1.0
         pb.changeDynamics(
             self._body, index, mass=float(mass), localInertiaDiagonal=[i * ratio for i in inertia], physicsClientId=cid
         )
-
-    def _nominal(self, owner: str, index: int) -> tuple[float, list[float]]:
-        """The mass and inertia diagonal PyBullet loaded for link ``owner`` (at ``index``)."""
-        if owner not in self._nominal_inertia:
-            info = pb.getDynamicsInfo(self._body, index, physicsClientId=self._client)
-            self._nominal_inertia[owner] = (float(info[0]), list(info[2]))
-        return self._nominal_inertia[owner]
 
     def joint_damping(self, joint: str) -> float:
         self._actuator(joint)
@@ -340,6 +331,14 @@ class PyBulletBackend(Backend):
 
 
 #: What this module offered before its parts moved to their own modules, still importable here.
+
+
+def _pose(matrix: FloatArray) -> tuple[list[float], list[float]]:
+    """A 4x4 transform as PyBullet's (position, xyzw quaternion)."""
+    w, x, y, z = quaternion_from_matrix(matrix)  # type: ignore[no-untyped-call]
+    return [float(v) for v in matrix[:3, 3]], [float(x), float(y), float(z), float(w)]
+
+
 __all__ = [
     "GROUND_RGBA",
     "MAX_CLIENTS",

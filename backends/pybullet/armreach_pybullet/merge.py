@@ -137,7 +137,7 @@ def merge_fixed(urdf: bytes) -> tuple[bytes, Merged]:
     from the unmerged arm's in 300 steps.)
     """
     root = etree.fromstring(urdf)
-    merged = merged_links(urdf)
+    merged = _where(root)  # read before the tree changes
     links = {str(element.get("name")): element for element in root.findall("link")}
     parts: dict[str, list[tuple[float, FloatArray, FloatArray]]] = {}
     for name, element in links.items():
@@ -172,10 +172,9 @@ def merge_fixed(urdf: bytes) -> tuple[bytes, Merged]:
     return bytes(etree.tostring(root)), merged
 
 
-def merged_links(urdf: bytes) -> Merged:
-    """Which link each link of ``urdf`` (the arm as PyBullet loads it, held joints welded) is
-    part of once :func:`merge_fixed` has merged the links fixed to another, and where."""
-    root = etree.fromstring(urdf)
+def _where(root: etree._Element) -> Merged:
+    """Which link each link of the URDF ``root`` (the arm as PyBullet loads it, held joints
+    welded) is part of once :func:`merge_fixed` has merged the links fixed to another, and where."""
     above = {str(j.find("child").get("link")): j for j in root.findall("joint")}  # type: ignore[union-attr]
     owner: dict[str, str] = {}
     offset: dict[str, FloatArray] = {}
@@ -204,7 +203,7 @@ def merged_links(urdf: bytes) -> Merged:
 
 def unmerged(urdf: bytes) -> Merged:
     """Every link of ``urdf`` as its own link (``PhysicsConfig.merge_fixed_links`` off)."""
-    merged = merged_links(urdf)
+    merged = _where(etree.fromstring(urdf))
     return Merged(
         owner={link: link for link in merged.owner},
         offset={link: np.eye(4) for link in merged.owner},
@@ -213,4 +212,4 @@ def unmerged(urdf: bytes) -> Merged:
     )
 
 
-__all__ = ["Merged", "merge_fixed", "merged_links", "unmerged"]
+__all__ = ["Merged", "merge_fixed", "unmerged"]
