@@ -10,9 +10,24 @@ from armreach_core.backend import Backend
 from armreach_core.plugins.specs import BackendProbes
 from armreach_core.robot.model import FloatArray
 from armreach_mujoco.backend import MuJoCoBackend
+from armreach_mujoco.cmotor import compiled_motors
 from armreach_mujoco.engine import mujoco
 from armreach_mujoco.native import NativeMotors
 from armreach_mujoco.servo import Motors
+
+
+def _motors(backend: MuJoCoBackend) -> Motors | NativeMotors:
+    """Motors as the env's (:class:`armreach_mujoco.state.StateIO`): the arm's joints, then the
+    held joints that have one, those aimed where they are held."""
+    compiled = backend.compiled
+    servoed = compiled.held_servos
+    kind = NativeMotors if compiled.native else Motors
+    motors = kind(
+        np.concatenate((compiled.qpos, compiled.held_qpos[servoed])),
+        np.concatenate((compiled.qvel, compiled.held_qvel[servoed])),
+    )
+    motors.targets[len(compiled.qpos) :] = [backend.robot.held_joints[i].position for i in servoed]
+    return motors
 
 
 def bare_loop(backend: Backend, deltas: FloatArray) -> None:
@@ -23,11 +38,12 @@ def bare_loop(backend: Backend, deltas: FloatArray) -> None:
     model, data = backend.model, backend.data
     lower, upper = backend.robot.lower, backend.robot.upper
     qpos_index, qvel_index = compiled.qpos, compiled.qvel
-    motors = (NativeMotors if compiled.native else Motors)(compiled.qpos, compiled.qvel)
+    motors = _motors(backend)
+    arm = motors.targets[: len(qpos_index)]  # a view
     ee = compiled.bodies[backend.robot.ee_link]
     q = data.qpos[qpos_index]  # indexing with an array copies
     for delta in deltas:
-        motors.targets[:] = np.minimum(np.maximum(q + delta, lower), upper)
+        arm[:] = np.minimum(np.maximum(q + delta, lower), upper)
         motors.step(model, data, substeps)
         mujoco.mj_kinematics(model, data)
         q = data.qpos[qpos_index]
@@ -36,34 +52,44 @@ def bare_loop(backend: Backend, deltas: FloatArray) -> None:
 
 
 def engine_seconds(backend: Backend, deltas: FloatArray) -> float:
-    """The bare loop, timing only MuJoCo's own step calls (``mj_step1``, ``mj_step2``): the motor's
-    reference, written between them, and everything else is left out. With MuJoCo's own actuators
-    (``mujoco-native``), the one ``mj_step`` call of a control step."""
+    """The bare loop, timing only MuJoCo's own step calls: with the compiled motor
+    (:mod:`armreach_mujoco.cmotor`) the one ``mj_step`` call of a control step, the motor's
+    callback inside it; without, ``mj_step1`` and ``mj_step2``, leaving out the motor's reference
+    written between them. With MuJoCo's own actuators (``mujoco-native``), the one ``mj_step``."""
     assert isinstance(backend, MuJoCoBackend)
     if backend.compiled.native:
         return _native_engine_seconds(backend, deltas)
     compiled, substeps = backend.compiled, backend.physics.substeps
     model, data = compiled.model, backend.data
     lower, upper = backend.robot.lower, backend.robot.upper
-    motors = Motors(compiled.qpos, compiled.qvel)
-    n = len(compiled.qvel)
+    motors = _motors(backend)
+    assert isinstance(motors, Motors)
+    in_c = compiled_motors(data, motors.qpos)
+    n = len(motors.qvel)
     dt = float(model.opt.timestep)
     stiffness = motors.gains / (dt * dt)
     clock, step1, step2 = time.perf_counter, mujoco.mj_step1, mujoco.mj_step2
     total = 0.0
     q = data.qpos[compiled.qpos]
     for delta in deltas:
-        offset = stiffness * np.minimum(np.maximum(q + delta, lower), upper)
-        for _ in range(substeps):
+        motors.targets[: len(q)] = np.minimum(np.maximum(q + delta, lower), upper)
+        if in_c is not None:
+            in_c.prepare(model, motors.gains, motors.targets)
             t0 = clock()
-            step1(model, data)
+            in_c.step(model, substeps)
             total += clock() - t0
-            aref = offset - stiffness * data.qpos[compiled.qpos] - data.qvel[compiled.qvel] / dt
-            first = data.ne + data.nf - n
-            data.efc_aref[first : first + n] = aref
-            t0 = clock()
-            step2(model, data)
-            total += clock() - t0
+        else:
+            offset = stiffness * motors.targets
+            for _ in range(substeps):
+                t0 = clock()
+                step1(model, data)
+                total += clock() - t0
+                aref = offset - stiffness * data.qpos[motors.qpos] - data.qvel[motors.qvel] / dt
+                first = data.ne + data.nf - n
+                data.efc_aref[first : first + n] = aref
+                t0 = clock()
+                step2(model, data)
+                total += clock() - t0
         mujoco.mj_kinematics(model, data)
         q = data.qpos[compiled.qpos]
     return total

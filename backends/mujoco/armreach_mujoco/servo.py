@@ -51,6 +51,7 @@ import numpy.typing as npt
 from armreach_core.backend import stable_damping
 from armreach_core.errors import ArmReachError
 from armreach_core.robot.model import HeldJoint, RobotModel
+from armreach_mujoco.cmotor import CompiledMotors, compiled_motors
 from armreach_mujoco.engine import mujoco
 
 #: PyBullet's ``positionGain`` (the backend's), the fraction of the error closed per physics step.
@@ -208,9 +209,20 @@ class Motors:
         self.gains = np.full(len(qvel), POSITION_GAIN)
         # views of MjData when the motor joints are contiguous (the usual case), found once
         self._qpos_at, self._qvel_at = _contiguous(qpos), _contiguous(qvel)
+        self._data: Any = None  # the MjData last stepped, and its compiled motors (None: Python's loop)
+        self._compiled: CompiledMotors | None = None
 
     def step(self, model: Any, data: Any, nstep: int) -> None:
-        """``nstep`` physics steps, the motors solved in each."""
+        """``nstep`` physics steps, the motors solved in each: in one ``mj_step`` call with the
+        compiled callback (:mod:`armreach_mujoco.cmotor`), else with Python between the halves of
+        each physics step. The two give the same motion."""
+        if self._data is not data:
+            self._data, self._compiled = data, compiled_motors(data, self.qpos)
+        compiled = self._compiled
+        if compiled is not None:
+            compiled.prepare(model, self.gains, self.targets)
+            compiled.step(model, nstep)
+            return
         n = len(self.qvel)
         dt = float(model.opt.timestep)
         # The reference (v* - v) / dt = offset - stiffness * q - v / dt. MuJoCo computes the motor
