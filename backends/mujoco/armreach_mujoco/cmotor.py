@@ -59,8 +59,8 @@ class _Slot(ctypes.Structure):
         ("active", ctypes.c_int64),
         ("n", ctypes.c_int64),
         ("qadr", ctypes.c_void_p),
-        ("offset", ctypes.c_void_p),
-        ("stiffness", ctypes.c_void_p),
+        ("gains", ctypes.c_void_p),
+        ("targets", ctypes.c_void_p),
         ("calls", ctypes.c_int64),
     ]
 
@@ -137,9 +137,12 @@ def _address(function: Any) -> int | None:
         return None
 
 
-def compiled_motors(data: Any, qpos: npt.NDArray[np.intp]) -> CompiledMotors | None:
+def compiled_motors(
+    data: Any, qpos: npt.NDArray[np.intp], gains: npt.NDArray[np.float64], targets: npt.NDArray[np.float64]
+) -> CompiledMotors | None:
     """Compiled motors for the joints at ``qpos`` of ``data``, or ``None``: no compiled callback
-    here, or another control callback was installed first (then the motors run in Python)."""
+    here, or another control callback was installed first (then the motors run in Python).
+    ``gains`` and ``targets`` are read where they are at every physics step: write them in place."""
     lib = library()
     if lib is None or not hasattr(data, "_address"):
         return None
@@ -147,7 +150,7 @@ def compiled_motors(data: Any, qpos: npt.NDArray[np.intp]) -> CompiledMotors | N
         _log_once("MuJoCo motors run in Python: another control callback (mjcb_control) is installed")
         return None
     try:
-        return CompiledMotors(lib, data, qpos)
+        return CompiledMotors(lib, data, qpos, gains, targets)
     except ArmReachError as exc:
         _log_once(f"MuJoCo motors run in Python: {exc}")
         return None
@@ -164,35 +167,40 @@ class CompiledMotors:
     Args:
         data: the ``MjData`` they drive.
         qpos: addresses of the motor joints in ``qpos``, in the order of the motor rows.
+        gains, targets: each motor's ``positionGain`` and target (float64, contiguous), which the
+            callback reads in every physics step: they must be changed in place.
     """
 
-    def __init__(self, lib: Any, data: Any, qpos: npt.NDArray[np.intp]) -> None:
+    def __init__(
+        self,
+        lib: Any,
+        data: Any,
+        qpos: npt.NDArray[np.intp],
+        gains: npt.NDArray[np.float64],
+        targets: npt.NDArray[np.float64],
+    ) -> None:
         n = len(qpos)
+        for name, array in (("gains", gains), ("targets", targets)):
+            if array.dtype != np.float64 or not array.flags.c_contiguous or array.shape != (n,):
+                raise ValueError(f"{name} must be {n} contiguous float64 values")
         self.data = data
         self._qadr = np.ascontiguousarray(qpos, dtype=np.int64)
-        self._offset, self._stiffness = np.zeros(n), np.zeros(n)
         slot = self._slot = _Slot(
-            int(data._address), 0, n, self._qadr.ctypes.data, self._offset.ctypes.data, self._stiffness.ctypes.data, 0
+            int(data._address), 0, n, self._qadr.ctypes.data, gains.ctypes.data, targets.ctypes.data, 0
         )
         index = self.index = lib.armreach_motor_register(ctypes.byref(slot))
         if index < 0:
             raise ArmReachError("more MuJoCo envs in one process than the compiled motor serves (4096)")
-        # the slot and its arrays, held by the finalizer, live until C has let go of them
-        weakref.finalize(self, _release, lib, index, (slot, self._qadr, self._offset, self._stiffness))
+        # the slot and the arrays it points into, held by the finalizer, live until C has let go of them
+        weakref.finalize(self, _release, lib, index, (slot, self._qadr, gains, targets))
 
-    def prepare(self, model: Any, gains: npt.NDArray[np.float64], targets: npt.NDArray[np.float64]) -> None:
-        """Set the position term ``k target - k q``, ``k = gains / dt²``, for the next step."""
-        dt = float(model.opt.timestep)
-        np.divide(gains, dt * dt, out=self._stiffness)
-        np.multiply(self._stiffness, targets, out=self._offset)
+    def step(self, model: Any, nstep: int) -> None:
+        """``nstep`` physics steps with the motors acting."""
         if not installed():
             raise ArmReachError(
                 "another MuJoCo control callback (mujoco.set_mjcb_control) replaced armreach's motor; "
                 f"remove it, or set {MOTOR_ENV}=python before importing armreach to run the motor without one"
             )
-
-    def step(self, model: Any, nstep: int) -> None:
-        """``nstep`` physics steps with the motors acting (after :meth:`prepare`)."""
         slot = self._slot
         slot.active = 1
         try:

@@ -64,7 +64,7 @@ def engine_seconds(backend: Backend, deltas: FloatArray) -> float:
     lower, upper = backend.robot.lower, backend.robot.upper
     motors = _motors(backend)
     assert isinstance(motors, Motors)
-    in_c = compiled_motors(data, motors.qpos)
+    in_c = compiled_motors(data, motors.qpos, motors.gains, motors.targets)
     n = len(motors.qvel)
     dt = float(model.opt.timestep)
     stiffness = motors.gains / (dt * dt)
@@ -74,7 +74,6 @@ def engine_seconds(backend: Backend, deltas: FloatArray) -> float:
     for delta in deltas:
         motors.targets[: len(q)] = np.minimum(np.maximum(q + delta, lower), upper)
         if in_c is not None:
-            in_c.prepare(model, motors.gains, motors.targets)
             t0 = clock()
             in_c.step(model, substeps)
             total += clock() - t0

@@ -205,22 +205,31 @@ class Motors:
 
     def __init__(self, qpos: npt.NDArray[np.intp], qvel: npt.NDArray[np.intp]) -> None:
         self.qpos, self.qvel = qpos, qvel
-        self.targets = np.zeros(len(qvel))
-        self.gains = np.full(len(qvel), POSITION_GAIN)
+        self._targets = np.zeros(len(qvel))
+        self._gains = np.full(len(qvel), POSITION_GAIN)
         # views of MjData when the motor joints are contiguous (the usual case), found once
         self._qpos_at, self._qvel_at = _contiguous(qpos), _contiguous(qvel)
         self._data: Any = None  # the MjData last stepped, and its compiled motors (None: Python's loop)
         self._compiled: CompiledMotors | None = None
+
+    @property
+    def targets(self) -> npt.NDArray[np.float64]:
+        """Each motor's target (rad or m), written in place: the compiled motor reads this array."""
+        return self._targets
+
+    @property
+    def gains(self) -> npt.NDArray[np.float64]:
+        """Each motor's ``positionGain``, written in place: the compiled motor reads this array."""
+        return self._gains
 
     def step(self, model: Any, data: Any, nstep: int) -> None:
         """``nstep`` physics steps, the motors solved in each: in one ``mj_step`` call with the
         compiled callback (:mod:`armreach_mujoco.cmotor`), else with Python between the halves of
         each physics step. The two give the same motion."""
         if self._data is not data:
-            self._data, self._compiled = data, compiled_motors(data, self.qpos)
+            self._data, self._compiled = data, compiled_motors(data, self.qpos, self._gains, self._targets)
         compiled = self._compiled
         if compiled is not None:
-            compiled.prepare(model, self.gains, self.targets)
             compiled.step(model, nstep)
             return
         n = len(self.qvel)
