@@ -127,6 +127,34 @@ def test_step_reward_equals_batch_compute_reward_bit_for_bit(exponent):
     )
 
 
+def test_reach_scores_through_one_distance_as_the_general_path_does():
+    """ReachTask.score computes the distance once; Task.score asks step_info, compute_terminated and
+    compute_reward, each computing it. Same reward, success and info, to the bit; and a subclass that
+    overrides compute_reward is scored by its override."""
+    from armreach_core.task import Task
+    from armreach_core.tasks.reach.task import ReachTask
+
+    env = ArmReach6DOFEnv(backend=BACKENDS[0])
+    task = env.unwrapped.task
+    rng = np.random.default_rng(11)
+    for _ in range(500):
+        task.target = rng.uniform(-1, 1, 3)
+        state = ArmState(np.zeros(6), np.zeros(6), task.target + rng.normal(size=3) * 10.0 ** rng.uniform(-3, 0))
+        fast, general = task.score(state), Task.score(task, state)
+        assert (fast.reward, fast.success, fast.info) == (general.reward, general.success, general.info)
+        assert list(fast.info) == list(general.info)
+
+    class Doubled(ReachTask):
+        def compute_reward(self, achieved_goal, desired_goal, info):
+            return 2.0 * super().compute_reward(achieved_goal, desired_goal, info)
+
+    doubled = Doubled(env.unwrapped.robot)
+    doubled.target = task.target
+    state = ArmState(np.zeros(6), np.zeros(6), task.target + 0.2)
+    assert doubled.score(state).reward == 2.0 * task.score(state).reward != 0.0
+    env.close()
+
+
 def test_success_terminates_with_bonus(env):
     env.reset(seed=0)
     unwrapped = env.unwrapped
