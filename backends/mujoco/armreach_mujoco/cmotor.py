@@ -69,15 +69,15 @@ def _include() -> Path:
     return Path(mujoco.__file__).parent / "include"
 
 
-def _build() -> Path:
-    """The compiled callback's path, compiling it first if this MuJoCo's is not cached."""
+def _build(again: bool = False) -> Path:
+    """The compiled callback's path, compiling it first if this MuJoCo's is not cached (or ``again``)."""
     include = _include()
     digest = hashlib.sha1(SOURCE.read_bytes())
     for header in HEADERS:
         digest.update((include / "mujoco" / header).read_bytes())
     digest.update(f"{mujoco.__version__} {platform.machine()} {platform.system()}".encode())
     out = cache_dir("mujoco-motor") / f"motor-{digest.hexdigest()[:16]}.so"
-    if out.is_file():
+    if out.is_file() and not again:
         return out
     compiler = shlex.split(os.environ.get("CC", "")) or [shutil.which("cc") or shutil.which("gcc") or ""]
     if not compiler[0]:
@@ -101,9 +101,14 @@ def library() -> Any:
     if os.environ.get(MOTOR_ENV, "").strip().lower() == "python":
         return None
     try:
-        lib = ctypes.CDLL(str(_build()))
+        path = _build()
+        try:
+            lib = ctypes.CDLL(str(path))
+        except OSError as exc:  # a cached file that does not load (cut short, say): built again, once
+            log.info("rebuilding the MuJoCo motor's callback: %s", exc)
+            lib = ctypes.CDLL(str(_build(again=True)))
     except (OSError, subprocess.SubprocessError) as exc:
-        log.info("MuJoCo motors run in Python (%s=python to choose it): %s", MOTOR_ENV, exc)
+        log.info("MuJoCo's motors run their Python loop (the same motion, slower): %s", exc)
         return None
     lib.armreach_motor_register.argtypes = [ctypes.POINTER(_Slot)]
     lib.armreach_motor_register.restype = ctypes.c_int
@@ -111,7 +116,7 @@ def library() -> Any:
     lib.armreach_motor_unregister.restype = None
     lib.armreach_motor_abi.restype = ctypes.c_int
     if lib.armreach_motor_abi() != ctypes.sizeof(_Slot):
-        log.info("MuJoCo motors run in Python: the compiled callback's layout does not match")
+        log.info("MuJoCo's motors run their Python loop: the compiled callback's layout does not match")
         return None
     return lib
 
@@ -147,12 +152,12 @@ def compiled_motors(
     if lib is None or not hasattr(data, "_address"):
         return None
     if not installed():
-        _log_once("MuJoCo motors run in Python: another control callback (mjcb_control) is installed")
+        _log_once("MuJoCo's motors run their Python loop: another control callback (mjcb_control) is installed")
         return None
     try:
         return CompiledMotors(lib, data, qpos, gains, targets)
     except ArmReachError as exc:
-        _log_once(f"MuJoCo motors run in Python: {exc}")
+        _log_once(f"MuJoCo's motors run their Python loop: {exc}")
         return None
 
 

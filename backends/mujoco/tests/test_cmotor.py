@@ -155,8 +155,26 @@ def test_without_a_compiler_the_motors_run_in_python(tmp_path, monkeypatch, capl
             motion = _run(env, 30, seed=4)
         assert _motors(env)._compiled is None
         assert np.array_equal(motion, reference)
-        assert "motors run in Python" in caplog.text and "failed" in caplog.text
+        assert "motors run their Python loop" in caplog.text and "failed" in caplog.text
         env.close()
+    finally:
+        monkeypatch.undo()
+        cmotor.library.cache_clear()
+    assert cmotor.library() is not None and cmotor.installed()
+
+
+def test_a_cached_callback_that_does_not_load_is_built_again(tmp_path, monkeypatch, caplog):
+    """A cached library cut short (a full disk, a killed build) is compiled again, not given up on."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    cmotor.library.cache_clear()
+    try:
+        path = cmotor._build()
+        path.write_bytes(path.read_bytes()[:100])
+        cmotor.library.cache_clear()
+        with caplog.at_level(logging.INFO, logger="armreach.mujoco"):
+            lib = cmotor.library()
+        assert lib is not None and "rebuilding" in caplog.text
+        assert path.stat().st_size > 1000
     finally:
         monkeypatch.undo()
         cmotor.library.cache_clear()
