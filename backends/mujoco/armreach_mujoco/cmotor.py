@@ -6,7 +6,7 @@ calls into MuJoCo per physics step, ten per control step: about 2 µs each time,
 of what the engine itself spends on ar6. ``motor.c`` does the same arithmetic as MuJoCo's
 control callback (``mjcb_control``, which ``mj_step`` calls at the point where ``mj_step1``
 ends), so a control step becomes one ``mj_step(model, data, substeps)`` call. The motion is
-the same to the last bit (``tests/test_mujoco_cmotor.py``).
+the same to the last bit (``backends/mujoco/tests/test_cmotor.py``).
 
 The callback is compiled once per MuJoCo version with the C compiler on ``PATH`` (``$CC``,
 else ``cc``) against the headers the ``mujoco`` package ships, into

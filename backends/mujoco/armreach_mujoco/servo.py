@@ -16,7 +16,9 @@ limits, as Bullet solves its motor rows. Each motor is a fixed tendon on its joi
 ``frictionloss`` = the URDF effort and the stiffest impedance. Its reference acceleration
 should be ``(v* - v) / dt``: MuJoCo computes ``-v / dt`` itself (the row's ``solref``,
 :func:`velocity_solref`), and between ``mj_step1`` and ``mj_step2`` (:class:`Motors`) the
-position term ``positionGain (target - q) / dt²`` is added. The solver then brings the joint
+position term ``positionGain (target - q) / dt²`` is added: by MuJoCo's control callback,
+compiled (:mod:`armreach_mujoco.cmotor`), or where that cannot be had by Python between the
+two calls. The solver then brings the joint
 to ``v*`` when the effort allows it, and pushes with the effort when not, against gravity,
 contacts and the other motors at once.
 
