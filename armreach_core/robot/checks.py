@@ -44,7 +44,7 @@ import numpy as np
 from lxml import etree
 
 from armreach_core.errors import URDFError
-from armreach_core.robot.inertia import repairs
+from armreach_core.robot.inertia import INERTIA_KEYS, inertia_tensor, repairs
 
 log = logging.getLogger("armreach.robot")
 
@@ -66,7 +66,6 @@ SIMULATED_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed")
 # digits (１, ٣) and spaces (U+00A0), which no engine reads as numbers or separators
 _NUMBER = re.compile(r"^[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$")
 _SPACES = re.compile(r"[ \t\n\r]+")
-_INERTIA = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 
 Element = etree._Element
 
@@ -182,17 +181,11 @@ def _check_inertial(inertial: Element) -> None:
     never_negative = "a mass is never negative: give the link's mass in kg"
     _numbers(mass, "value", 1, required=True, minimum=0.0, fix=never_negative)
     values = {}
-    for key in _INERTIA:
+    for key in INERTIA_KEYS:
         number = _numbers(inertia, key, 1, required=True)
         assert number is not None
         values[key] = number[0]
-    tensor = np.array(
-        [
-            [values["ixx"], values["ixy"], values["ixz"]],
-            [values["ixy"], values["iyy"], values["iyz"]],
-            [values["ixz"], values["iyz"], values["izz"]],
-        ]
-    )
+    tensor = inertia_tensor(values)
     eigenvalues = np.linalg.eigvalsh(tensor)
     if eigenvalues[0] < -1e-12 - 1e-9 * abs(eigenvalues[-1]):
         raise URDFError(

@@ -28,6 +28,7 @@ user gave, and the kinematics and statics read from it, are unchanged.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -36,8 +37,15 @@ import numpy as np
 DENSEST = 7850.0
 #: Links lighter than this (kg, a milligram) are frames, not bodies: their inertia is left alone.
 MASSLESS = 1e-6
-_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+#: The six values of a URDF ``<inertia>``, in its order.
+INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 _PLACES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+
+
+def inertia_tensor(values: Mapping[str, float]) -> np.ndarray[Any, Any]:
+    """The symmetric 3x3 tensor of an ``<inertia>``'s six values, by :data:`INERTIA_KEYS`."""
+    v = values
+    return np.array([[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]], [v["ixz"], v["iyz"], v["izz"]]])
 
 
 def ball_moment(mass: float) -> float:
@@ -95,10 +103,7 @@ def repairs(root: Any) -> list[tuple[Any, np.ndarray[Any, Any], str]]:
         mass_element, inertia = inertial.find("mass"), inertial.find("inertia")
         if mass_element is None or inertia is None:
             continue
-        v = {key: float(inertia.get(key, "0")) for key in _KEYS}
-        tensor = np.array(
-            [[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]], [v["ixz"], v["iyz"], v["izz"]]]
-        )
+        tensor = inertia_tensor({key: float(inertia.get(key, "0")) for key in INERTIA_KEYS})
         fix = repaired(float(mass_element.get("value", "0")), tensor, span)
         if fix is not None:
             found.append((inertia, fix[0], fix[1]))
@@ -110,6 +115,6 @@ def repair_inertials(root: Any) -> int:
     finds; the number repaired."""
     found = repairs(root)
     for inertia, tensor, _ in found:
-        for key, (i, j) in zip(_KEYS, _PLACES, strict=True):
+        for key, (i, j) in zip(INERTIA_KEYS, _PLACES, strict=True):
             inertia.set(key, repr(float(tensor[i, j])))
     return len(found)

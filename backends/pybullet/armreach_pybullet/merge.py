@@ -23,6 +23,7 @@ import numpy as np
 from lxml import etree
 from trimesh.transformations import euler_from_matrix, euler_matrix
 
+from armreach_core.robot.inertia import INERTIA_KEYS, inertia_tensor
 from armreach_core.robot.model import FloatArray
 from armreach_core.robot.statics import BARE_LINK_MASS
 
@@ -61,7 +62,7 @@ def _origin(element: etree._Element) -> FloatArray:
     return matrix
 
 
-def _set_origin(element: etree._Element, matrix: FloatArray) -> None:
+def set_origin(element: etree._Element, matrix: FloatArray) -> None:
     """Write ``matrix`` as ``element``'s ``<origin>`` (URDF's fixed-axis roll, pitch, yaw)."""
     origin = element.find("origin")
     if origin is None:
@@ -70,9 +71,6 @@ def _set_origin(element: etree._Element, matrix: FloatArray) -> None:
     origin.set("xyz", " ".join(repr(float(v)) for v in matrix[:3, 3]))
     rpy = euler_from_matrix(matrix, "sxyz")  # type: ignore[no-untyped-call]
     origin.set("rpy", " ".join(repr(float(v)) for v in rpy))
-
-
-INERTIA = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 
 
 def _inertial(element: etree._Element) -> tuple[float, FloatArray, FloatArray]:
@@ -84,17 +82,11 @@ def _inertial(element: etree._Element) -> tuple[float, FloatArray, FloatArray]:
         return BARE_LINK_MASS, np.zeros(3), BARE_LINK_MASS * np.eye(3)
     mass_element = inertial.find("mass")
     mass = float(mass_element.get("value", 0.0)) if mass_element is not None else 0.0
-    values = dict.fromkeys(INERTIA, 0.0)
+    values = dict.fromkeys(INERTIA_KEYS, 0.0)
     tensor = inertial.find("inertia")
     if tensor is not None:
-        values.update({key: float(tensor.get(key, 0.0)) for key in INERTIA})
-    matrix = np.array(
-        [
-            [values["ixx"], values["ixy"], values["ixz"]],
-            [values["ixy"], values["iyy"], values["iyz"]],
-            [values["ixz"], values["iyz"], values["izz"]],
-        ]
-    )
+        values.update({key: float(tensor.get(key, 0.0)) for key in INERTIA_KEYS})
+    matrix = inertia_tensor(values)
     frame = _origin(inertial)
     rotation = frame[:3, :3]
     return mass, frame[:3, 3].copy(), rotation @ matrix @ rotation.T
@@ -119,11 +111,11 @@ def _write_inertial(link: etree._Element, mass: float, centre: FloatArray, inert
     link.insert(0, inertial)
     frame = np.eye(4)
     frame[:3, 3] = centre
-    _set_origin(inertial, frame)
+    set_origin(inertial, frame)
     etree.SubElement(inertial, "mass", value=repr(float(mass)))
     (ixx, ixy, ixz), (_, iyy, iyz), (_, _, izz) = inertia
     values = (ixx, ixy, ixz, iyy, iyz, izz)
-    etree.SubElement(inertial, "inertia", {k: repr(float(v)) for k, v in zip(INERTIA, values, strict=True)})
+    etree.SubElement(inertial, "inertia", {k: repr(float(v)) for k, v in zip(INERTIA_KEYS, values, strict=True)})
 
 
 def merge_fixed(urdf: bytes) -> tuple[bytes, Merged]:
@@ -148,7 +140,7 @@ def merge_fixed(urdf: bytes) -> tuple[bytes, Merged]:
         target = links[owner]
         for tag in ("visual", "collision"):
             for child in element.findall(tag):
-                _set_origin(child, offset @ _origin(child))
+                set_origin(child, offset @ _origin(child))
                 target.append(child)
         mass, centre, tensor = _inertial(element)  # a massless link's inertia counts too (Franka's link8)
         turn = offset[:3, :3]
@@ -168,7 +160,7 @@ def merge_fixed(urdf: bytes) -> tuple[bytes, Merged]:
         name = str(parent.get("link"))
         if merged.owner[name] != name:
             parent.set("link", merged.owner[name])
-            _set_origin(joint, merged.offset[name] @ _origin(joint))
+            set_origin(joint, merged.offset[name] @ _origin(joint))
     return bytes(etree.tostring(root)), merged
 
 
@@ -212,4 +204,4 @@ def unmerged(urdf: bytes) -> Merged:
     )
 
 
-__all__ = ["Merged", "merge_fixed", "unmerged"]
+__all__ = ["Merged", "merge_fixed", "set_origin", "unmerged"]

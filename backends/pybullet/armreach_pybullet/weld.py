@@ -27,12 +27,12 @@ from types import MappingProxyType
 
 import numpy as np
 from lxml import etree
-from trimesh.transformations import euler_from_matrix
 
 from armreach_core.robot.geometry import moving_with
 from armreach_core.robot.kinematics import joint_motion
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.robot.statics import GRAVITY
+from armreach_pybullet.merge import set_origin
 
 #: How many times the gravity load of what it carries a held joint's effort limit must be for
 #: the joint to be welded (gravity at 1 g; the rest of the margin covers the arm's accelerations).
@@ -110,12 +110,7 @@ def weld(urdf: bytes, robot: RobotModel) -> bytes:
             continue
         tree = frames[name]
         held: FloatArray = tree.origin @ joint_motion(tree.kind, tree.axis, np.asarray(joints[name]))
-        origin = joint.find("origin")
-        if origin is None:
-            origin = etree.SubElement(joint, "origin")
-        origin.set("xyz", " ".join(repr(float(v)) for v in held[:3, 3]))
-        rpy = euler_from_matrix(held, "sxyz")  # type: ignore[no-untyped-call]  # URDF's fixed-axis roll, pitch, yaw
-        origin.set("rpy", " ".join(repr(float(v)) for v in rpy))
+        set_origin(joint, held)
         joint.set("type", "fixed")
         for tag in ("axis", "limit", "mimic", "dynamics", "calibration", "safety_controller"):
             for element in joint.findall(tag):
