@@ -239,14 +239,16 @@ class ReachTask(Task):
         if (cls.step_info, cls.compute_reward, cls.compute_terminated) != _OWN_SCORING:
             return super().score(state)
         distance = goal_distance(self.achieved_goal(state), self.desired_goal())
-        distance_term, success_term = self._distance_term(distance), self._success_term(distance)
+        info = self._terms(distance)
         success = bool(self._reached(distance))
-        info = {"distance": distance, "reward_distance": distance_term, "reward_success": success_term}
         info["is_success"] = success
-        return Score(float(distance_term + success_term), success, info)
+        return Score(float(info["reward_distance"] + info["reward_success"]), success, info)
 
     def step_info(self, state: ArmState, achieved_goal: GoalArray, desired_goal: GoalArray) -> dict[str, Any]:
-        distance = goal_distance(achieved_goal, desired_goal)
+        return self._terms(goal_distance(achieved_goal, desired_goal))
+
+    def _terms(self, distance: Any) -> dict[str, Any]:
+        """The ``info`` terms of a distance to the goal."""
         return {
             "distance": distance,
             "reward_distance": self._distance_term(distance),
