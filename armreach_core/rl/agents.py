@@ -141,6 +141,7 @@ def build_model(
         from armreach_core.rl.standardize import Standardize
 
         policy_kwargs["features_extractor_class"] = Standardize
+    policy_kwargs.update(optimizer_kwargs(learner, algo))
     kwargs: dict[str, Any] = {
         "policy_kwargs": policy_kwargs,
         "seed": seed,
@@ -157,7 +158,6 @@ def build_model(
                 kwargs[key] = settings[key]
         policy_name = "MlpPolicy"
     else:
-        policy_kwargs.update(optimizer_kwargs(learner, algo))
         for key in ("tau", "buffer_size", "learning_starts", "gradient_steps", "policy_delay"):
             if key in settings:
                 kwargs[key] = settings[key]
