@@ -7,7 +7,8 @@ buffers, evaluation) does not care which one trained a run. The learner is a pre
 without one (written before learners existed) is an SB3 run.
 
 Off-policy runs default to SBX, which trains DDPG, TD3 and SAC faster than SB3 at the
-paper's settings; PPO stays on SB3, which is faster there (its cost is the rollout).
+paper's settings; PPO stays on SB3, whose rollouts armreach collects with the policy in NumPy
+(:mod:`armreach_core.rl.lean_ppo`).
 ``armreach bench --learners sb3,sbx`` measures both; the figures and the command are in
 docs/learning.md ("Learners side by side").
 """
