@@ -26,16 +26,10 @@ from typing import Any
 from stable_baselines3.common.vec_env.base_vec_env import CloudpickleWrapper
 
 from armreach_core.rl.validation import BATCH, UntilSuccess, Validation, evaluation_envs, validate
+from armreach_core.rl.worker import Failure
 
 #: What a worker needs to act as the policy did: arrays only (see :func:`for_worker`).
 Parameters = dict[str, Any]
-
-
-class _Failure:
-    """An exception raised in the worker, sent back to be raised again in the training process."""
-
-    def __init__(self, error: BaseException) -> None:
-        self.error = error
 
 
 def holds_torch_parameters(policy: Any) -> bool:
@@ -148,7 +142,7 @@ def _worker(remote: Connection, parent: Connection, payload: CloudpickleWrapper)
                 load_parameters(policy, params)
                 remote.send(validate(act, envs, spec, lanes=BATCH))
             except Exception as error:
-                remote.send(_Failure(error))
+                remote.send(Failure(error))
     except (EOFError, KeyboardInterrupt):  # the training process went away
         pass
     finally:
@@ -198,7 +192,7 @@ class BackgroundValidator:
         except EOFError:
             raise RuntimeError("the evaluation worker process ended unexpectedly") from None
         self.pending -= 1
-        if isinstance(answer, _Failure):
+        if isinstance(answer, Failure):
             raise answer.error
         result: Validation = answer
         return result

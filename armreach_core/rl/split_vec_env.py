@@ -22,13 +22,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import CloudpickleWrapper
 
 from armreach_core.rl.vec_env import InProcessVecEnv
-
-
-class _Failure:
-    """An exception raised in the worker, sent back to be raised again in the training process."""
-
-    def __init__(self, error: BaseException) -> None:
-        self.error = error
+from armreach_core.rl.worker import Failure
 
 
 def _worker(remote: Connection, parent: Connection, factories: CloudpickleWrapper) -> None:
@@ -52,7 +46,7 @@ def _worker(remote: Connection, parent: Connection, factories: CloudpickleWrappe
                     name, args, kwargs = data
                     remote.send(getattr(vec, name)(*args, **kwargs))
             except Exception as error:  # an env's error: the training process raises it
-                remote.send(_Failure(error))
+                remote.send(Failure(error))
     except (EOFError, KeyboardInterrupt):  # the main process went away
         vec.close()
 
@@ -126,7 +120,7 @@ class SplitVecEnv(VecEnv):
             answer = self.remote.recv()
         except EOFError:
             raise RuntimeError("the split vectorised env's worker process ended unexpectedly") from None
-        if isinstance(answer, _Failure):
+        if isinstance(answer, Failure):
             raise answer.error
         return answer
 
