@@ -19,7 +19,7 @@ from armreach_core.cli import main
 from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
 from armreach_core.rl.config import resolve_config
-from armreach_core.rl.learners import algo_class, policy_parameters
+from armreach_core.rl.learners import algo_class, learner_of, policy_parameters
 from tests.conftest import TINY as TRAINING_TINY
 from tests.conftest import TrainedRun
 
@@ -80,7 +80,7 @@ def test_sbx_run_trains_evaluates_and_resumes_like_an_sb3_run(
     config = runs.read_config(run_dir)
     assert config.learner == "sbx"
     trained = algo_class("ddpg", "sbx").load(run_dir / runs.MODEL, device="cpu")
-    assert type(trained).__module__.startswith("sbx")
+    assert learner_of(trained) == "sbx"
 
     def checkpoint() -> Any:
         model: Any = algo_class("ddpg", "sbx").load(run_dir / runs.CHECKPOINT, device="cpu")

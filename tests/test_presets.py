@@ -11,6 +11,7 @@ import pytest
 
 from armreach_core.errors import ConfigError
 from armreach_core.rl.config import resolve_config
+from armreach_core.rl.learners import learner_of
 from armreach_core.rl.presets import bundled_presets, load_preset, parse_preset
 
 
@@ -73,7 +74,7 @@ def test_paper_models_are_built_with_those_settings(tmp_path: Path, algo: str, l
     env = make_vec_env(config, tmp_path, 0, 1, append=False)
     model = build_model(algo, config.settings, env, 0, None, "cpu")
     env.close()
-    assert type(model).__module__.split(".")[0] == {"sb3": "stable_baselines3", "sbx": "sbx"}[learner]
+    assert learner_of(model) == learner
     assert model.gamma == 0.99
     assert model.batch_size == 300
     if algo == "ppo":

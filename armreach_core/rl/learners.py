@@ -102,6 +102,10 @@ def algo_class(algo: str, learner: str = LEGACY_LEARNER) -> type[BaseAlgorithm]:
         from armreach_core.rl.lean_ppo import LeanPPO
 
         return LeanPPO
+    if (learner, algo) == ("sbx", "sac"):  # SBX's SAC drawing its actions in one call (rl.lean_sac)
+        from armreach_core.rl.lean_sac import LeanSAC
+
+        return LeanSAC
     cls: type[BaseAlgorithm] = getattr(library, CLASS_NAMES[algo])
     return cls
 
@@ -143,6 +147,20 @@ def optimizer_kwargs(learner: str, algo: str) -> dict[str, Any]:
     return {"optimizer_kwargs": {"fused": True}} if learner == "sb3" and algo != "crossq" else {}
 
 
+def library_class(model: BaseAlgorithm) -> type[BaseAlgorithm]:
+    """The learner library's own class of ``model``: ``PPO`` for armreach's ``LeanPPO``, SBX's ``SAC``
+    for ``LeanSAC``, the class itself for the rest."""
+    for cls in type(model).__mro__:
+        if cls.__module__.split(".")[0] in ("stable_baselines3", "sb3_contrib", "sbx"):
+            return cls
+    return type(model)
+
+
+def learner_of(model: BaseAlgorithm) -> str:
+    """``sbx`` or ``sb3``: the learner whose class ``model`` is (or derives from)."""
+    return "sbx" if library_class(model).__module__.split(".")[0] == "sbx" else "sb3"
+
+
 def policy_parameters(model: BaseAlgorithm) -> dict[str, npt.NDArray[Any]]:
     """The learned arrays of ``model`` by name, as NumPy arrays, whichever learner trained it.
 
@@ -153,7 +171,7 @@ def policy_parameters(model: BaseAlgorithm) -> dict[str, npt.NDArray[Any]]:
     """
     import numpy as np
 
-    if type(model).__module__.split(".")[0] == "sbx":
+    if learner_of(model) == "sbx":
         import jax
         from flax.training.train_state import TrainState
 

@@ -24,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.errors import ConfigError
+from armreach_core.rl.learners import learner_of, library_class
 
 CARD_FORMAT = "armreach-policy-card"
 CARD_VERSION = 1
@@ -76,8 +77,8 @@ def _flax_layers(params: Any, activation: str, squash: str) -> list[Layer]:
 
 def policy_layers(model: Any) -> tuple[list[Layer], str]:
     """The deterministic policy of ``model`` as layers, and what bounds its output (``clip`` or ``tanh``)."""
-    algo = type(model).__name__.lower()
-    if type(model).__module__.split(".")[0] == "sbx":
+    algo = library_class(model).__name__.lower()
+    if learner_of(model) == "sbx":
         return _sbx_layers(model, algo)
     policy = model.policy
     if algo == "ppo":
@@ -87,7 +88,7 @@ def policy_layers(model: Any) -> tuple[list[Layer], str]:
     if algo == "sac":
         layers = _torch_layers([*policy.actor.latent_pi, policy.actor.mu])
         return [*layers[:-1], Layer(layers[-1].weight, layers[-1].bias, "tanh")], "tanh"
-    raise ConfigError(f"cannot export a {type(model).__name__} policy; exported are PPO, DDPG, TD3 and SAC")
+    raise ConfigError(f"cannot export a {library_class(model).__name__} policy; exported are PPO, DDPG, TD3 and SAC")
 
 
 def _sbx_layers(model: Any, algo: str) -> tuple[list[Layer], str]:
