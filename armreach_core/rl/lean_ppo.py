@@ -151,6 +151,9 @@ class LeanPPO(PPO):
             actions, values, log_probs = policy(self._last_obs)  # type: ignore[arg-type]
             clipped_actions = np.clip(actions, low, high)
             new_obs, rewards, dones, infos = env.step(clipped_actions)
+            # float32, as the buffer keeps them, before a time-out adds its value: the same sums
+            # whether the vec env gives float32 (one process) or float64 (SubprocVecEnv)
+            rewards = rewards.astype(np.float32, copy=False)
             self.num_timesteps += env.num_envs
             callback.update_locals(locals())
             if not callback.on_step():
