@@ -77,16 +77,7 @@ def test_a_rollout_is_the_one_sb3_collects_from_the_same_state() -> None:
         _collect(model)
     a, b = lean.rollout_buffer, reference.rollout_buffer
     assert int(a.episode_starts[1:].sum()) >= 4  # time-outs happened inside the rollout
-    for name in (
-        "observations",
-        "actions",
-        "rewards",
-        "episode_starts",
-        "values",
-        "log_probs",
-        "returns",
-        "advantages",
-    ):
+    for name in BUFFERS:
         np.testing.assert_allclose(getattr(a, name), getattr(b, name), atol=1e-4, err_msg=name)
     assert lean.num_timesteps == reference.num_timesteps == 4 * SETTINGS["n_steps"]
     assert len(lean.ep_info_buffer) == len(reference.ep_info_buffer) > 0

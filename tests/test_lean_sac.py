@@ -32,13 +32,14 @@ def test_lean_sac_trains_sbxs_sac_bit_for_bit() -> None:
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
     np.testing.assert_array_equal(lean.replay_buffer.actions[:160], own.replay_buffer.actions[:160])
     np.testing.assert_array_equal(np.asarray(lean.policy.key), np.asarray(own.policy.key))
-    # the exploring actions after training too, and a model saved by one loads with the other
+    # the exploring actions after training too
     obs = lean.env.reset()
     np.testing.assert_array_equal(lean.predict(obs)[0], own.predict(obs)[0])
     assert not np.array_equal(lean.predict(obs)[0], lean.predict(obs)[0])  # the key moves on
 
 
 def test_deterministic_actions_are_sbxs_own(tmp_path: Any) -> None:
+    """A model LeanSAC saved loads with SBX's SAC and acts the same."""
     from sbx import SAC
 
     lean = _trained(LeanSAC, steps=60)
