@@ -9,14 +9,18 @@ import pytest
 from PIL import Image
 
 from armreach_core.cli import main
+from armreach_core.diagnostics.bench import bench_bare
+from armreach_core.env import ArmEnv
 from tests.conftest import BACKENDS
 
 pytestmark = pytest.mark.skipif(not BACKENDS, reason="no physics backend installed")
 FAST = ["--steps", "200", "--ik-episodes", "3", "--parity-steps", "0", "--backends", BACKENDS[0]]
-#: Env steps per second the page reports for ar6 (200 random steps): measured PyBullet 6,100,
-#: MuJoCo 8,700-9,700 (``armreach robot --steps 200 --ik-episodes 3 --parity-steps 0
-#: --backends NAME``, twice each, on a 2-core machine shared with other work); a third is the bound.
-STEPS_PER_S = {"pybullet": 2000.0, "mujoco": 2900.0}
+#: The page's env steps/s for ar6 (200 random steps, resets timed) as a share of the bare
+#: engine loop's (:func:`~armreach_core.diagnostics.bench.bench_bare`, timed right after):
+#: measured 0.68-0.88 (PyBullet) and 0.62-0.68 (MuJoCo), three runs each on a 2-core machine
+#: shared with other work. Absolute steps/s varied 3x between days on the same machine; the
+#: share does not, and an env step costing twice what it does now falls below the bound.
+LEAST_SHARE_OF_BARE = 0.45
 
 
 def test_the_bundled_arm_is_usable(tmp_path, capsys):
@@ -28,7 +32,12 @@ def test_the_bundled_arm_is_usable(tmp_path, capsys):
     assert report["ee_link"] == "tool0"
     (engine,) = report["engines"]
     assert engine["deterministic"] is True
-    assert engine["steps_per_s"] >= STEPS_PER_S[BACKENDS[0]], engine["steps_per_s"]
+    env = ArmEnv(backend=BACKENDS[0])
+    try:
+        bare = bench_bare(env, 200, 3)
+    finally:
+        env.close()
+    assert engine["steps_per_s"] >= LEAST_SHARE_OF_BARE * bare, (engine["steps_per_s"], bare)
     # the IK episodes reach every target, in 22 steps on average (measured on both engines)
     assert engine["ik_success"] == 1.0 and engine["ik_steps"] <= 44
     assert report["home_lowest_m"] == pytest.approx(0.02916, abs=1e-4)  # measured: the wrist 29.16 mm up

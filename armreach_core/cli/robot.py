@@ -26,7 +26,9 @@ def add_parser(sub: Any) -> None:
     parser.add_argument(
         "--backends", nargs="+", default=None, metavar="NAME", help="default: every installed one but variants"
     )
-    parser.add_argument("--steps", type=int, default=500, help="random-action steps timed per backend (default: 500)")
+    parser.add_argument(
+        "--steps", type=int, default=500, help="random-action steps timed per backend, best of 3 passes (default: 500)"
+    )
     parser.add_argument("--ik-episodes", type=int, default=20, help="IK reference episodes per backend (default: 20)")
     parser.add_argument(
         "--parity-steps", type=int, default=100, help="steps of the parity check, 0: skip (default: 100)"
