@@ -65,7 +65,7 @@ class BackendBench:
         return self.engine_steps_per_s / self.env_steps_per_s
 
 
-def _best(repeats: int, run: Callable[[], float]) -> float:
+def best_of(repeats: int, run: Callable[[], float]) -> float:
     """The best (smallest) of ``repeats`` timings: the least disturbed by other load."""
     return min(run() for _ in range(repeats))
 
@@ -118,7 +118,7 @@ def _episodes_per_second(
             env.reset()
         return total
 
-    return steps / _best(repeats, run)
+    return steps / best_of(repeats, run)
 
 
 def bench_env_step(env: ArmEnv, steps: int, repeats: int) -> float:
@@ -137,7 +137,7 @@ def bench_env_step(env: ArmEnv, steps: int, repeats: int) -> float:
                 t0 = time.perf_counter()
         return total + time.perf_counter() - t0
 
-    return steps / _best(repeats, run)
+    return steps / best_of(repeats, run)
 
 
 def bench_reset(env: ArmEnv, n: int) -> float:

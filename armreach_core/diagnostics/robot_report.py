@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from armreach_core.diagnostics.bench import EPISODE_STEPS
+from armreach_core.diagnostics.bench import EPISODE_STEPS, best_of
 from armreach_core.diagnostics.corpus import CorpusArm, for_each_corpus_arm
 from armreach_core.diagnostics.picture import robot_picture
 from armreach_core.env import ArmEnv
@@ -211,16 +211,17 @@ def _steps_per_s(env: ArmEnv, steps: int, seed: int) -> float:
     """Env steps/s over ``steps`` random actions in the bench's episodes, resets timed; best of
     :data:`SPEED_PASSES` passes."""
     actions = np.random.default_rng(seed).uniform(-1, 1, (steps, env.task.action_size())).astype(np.float32)
-    best = math.inf
-    for _ in range(SPEED_PASSES):
+
+    def one_pass() -> float:
         env.reset(seed=seed)
         t0 = time.perf_counter()
         for i, action in enumerate(actions, 1):
             _, _, terminated, truncated, _ = env.step(action)
             if terminated or truncated or i % EPISODE_STEPS == 0:
                 env.reset()
-        best = min(best, time.perf_counter() - t0)
-    return steps / best
+        return time.perf_counter() - t0
+
+    return steps / best_of(SPEED_PASSES, one_pass)
 
 
 def _engine(backend: str, env_kwargs: Mapping[str, Any], steps: int, ik_episodes: int, seed: int) -> EngineFacts:
