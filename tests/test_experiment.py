@@ -159,10 +159,11 @@ def test_runs_trained_side_by_side_give_the_runs_trained_one_after_another(tmp_p
     preset.write_text(TINY)
     contenders = [Contender("PPO", "ppo", str(preset)), Contender("DDPG", "ddpg", str(preset))]
     outcomes = {}
+    references = {}
     for jobs in (1, 2):
         out = tmp_path / f"jobs{jobs}"
         log = io.StringIO()
-        results, _ = run_experiment(
+        results, ik = run_experiment(
             out, contenders, seeds=2, episodes=2, stream=log, eval_max_episode_steps=40, jobs=jobs
         )
         assert [r.seeds for r in results] == [[0, 1], [0, 1]]
@@ -177,5 +178,9 @@ def test_runs_trained_side_by_side_give_the_runs_trained_one_after_another(tmp_p
             if d.name != "ik"
         }
         assert [len(r.summaries) for r in results] == [2, 2]
+        # the IK reference, evaluated in a worker beside the last run, gives what it gives alone
+        summary = {k: v for k, v in ik.summary().items() if k != "seconds"}  # all but its wall-clock
+        references[jobs] = (summary, (out / "ik" / "eval-pybullet" / "episodes.csv").read_text())
     assert outcomes[2] == outcomes[1]
+    assert references[2] == references[1]
     assert len(outcomes[1]) == 4

@@ -179,9 +179,13 @@ class _Job:
     action: str
 
 
+#: What a run (or the IK reference) gives the experiment: training seconds, evaluation, its summary.
+Outcome = tuple[float, EvaluationResult, dict[str, Any]]
+
+
 def _train_and_evaluate(
     job: _Job, episodes: int, backend: str, stream: TextIO | None, command: list[str] | None
-) -> tuple[float, EvaluationResult, dict[str, Any]]:
+) -> Outcome:
     """Train ``job`` (unless its run is reused), evaluate it and save the evaluation in its folder."""
     t0 = time.perf_counter()
     if job.action != "reusing":
@@ -200,11 +204,26 @@ def _longest_first(job: _Job) -> tuple[bool, int]:
     return (not job.config.off_policy, -job.config.timesteps)
 
 
+def _evaluate_reference(run_dir: Path, episodes: int, backend: str) -> Outcome:
+    """Evaluate the IK reference whose config is in ``run_dir``, saving the evaluation there."""
+    t0 = time.perf_counter()
+    evaluation = evaluate_run(run_dir, episodes=episodes, backend=backend)
+    return time.perf_counter() - t0, evaluation, save_evaluation(evaluation, run_dir / f"eval-{backend}")
+
+
 def _run_jobs(
-    jobs: list[_Job], workers: int, episodes: int, backend: str, stream: TextIO | None, command: list[str] | None
-) -> Iterator[tuple[_Job, tuple[float, EvaluationResult, dict[str, Any]]]]:
-    """Each job's outcome, in the jobs' order: one after another, or ``workers`` processes side by
-    side, started longest first (:func:`_longest_first`).
+    jobs: list[_Job],
+    workers: int,
+    episodes: int,
+    backend: str,
+    stream: TextIO | None,
+    command: list[str] | None,
+    reference: Path,
+) -> Iterator[tuple[_Job | None, Outcome]]:
+    """Each job's outcome, in the jobs' order, then the IK reference's (job ``None``, evaluated
+    from its folder ``reference``): one after another, or ``workers`` processes side by side,
+    runs started longest first (:func:`_longest_first`) and the reference queued last, so that
+    it is evaluated beside the last run rather than after it.
 
     Side by side, each run trains in a process of its own (one torch and XLA thread each, the
     training default) and shows no progress bar; Ctrl-C stops them all, each keeping its
@@ -214,6 +233,7 @@ def _run_jobs(
         for job in jobs:
             _log(stream, f"{job.action} {job.label}, seed {job.seed}: {job.run_dir}")
             yield job, _train_and_evaluate(job, episodes, backend, stream, command)
+        yield None, _evaluate_reference(reference, episodes, backend)
         return
     context = multiprocessing.get_context("spawn")
     with concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
@@ -222,9 +242,11 @@ def _run_jobs(
             job = jobs[i]
             _log(stream, f"{job.action} {job.label}, seed {job.seed}: {job.run_dir}")
             futures[i] = pool.submit(_train_and_evaluate, job, episodes, backend, None, command)
+        last = pool.submit(_evaluate_reference, reference, episodes, backend)
         try:
             for i, job in enumerate(jobs):
                 yield job, futures[i].result()
+            yield None, last.result()
         except BaseException:
             pool.shutdown(wait=True, cancel_futures=True)
             raise
@@ -268,8 +290,17 @@ def run_experiment(
             run_dir = out / f"{contender.algo}{'-her' if contender.her else ''}-{config.preset}-s{seed}"
             config, action = plan_run(run_dir, config)
             planned.append(_Job(index, contender.label, seed, config, run_dir, action))
+    ik_dir = runs.new_run_dir(out / "ik")  # nothing to train: always written afresh
+    ik_config = resolve_config(
+        algo="ik", preset="paper", backend=backend, eval_max_episode_steps=eval_max_episode_steps
+    )
+    runs.write_config(ik_dir, ik_config)
     results = [ContenderResult(contender) for contender in contenders]
-    for job, (seconds, evaluation, summary) in _run_jobs(planned, jobs, episodes, backend, stream, command):
+    ik: EvaluationResult | None = None
+    for job, (seconds, evaluation, summary) in _run_jobs(planned, jobs, episodes, backend, stream, command, ik_dir):
+        if job is None:
+            ik = evaluation
+            continue
         result = results[job.contender]
         _log(stream, f"  {result.contender.label}, seed {job.seed}: success {100 * summary['success_rate']:.0f}% "
                      f"over {episodes} episodes")  # fmt: skip
@@ -284,11 +315,5 @@ def run_experiment(
             int(read_progress(job.run_dir).get("timesteps") or runs.read_config(job.run_dir).timesteps)
         )
         result.stopped.append(stopped_early(job.run_dir))
-    ik_dir = runs.new_run_dir(out / "ik")  # nothing to train: always written afresh
-    ik_config = resolve_config(
-        algo="ik", preset="paper", backend=backend, eval_max_episode_steps=eval_max_episode_steps
-    )
-    runs.write_config(ik_dir, ik_config)
-    ik = evaluate_run(ik_dir, episodes=episodes, backend=backend)
-    save_evaluation(ik, ik_dir / f"eval-{backend}")
+    assert ik is not None  # _run_jobs yields the reference last
     return results, ik
