@@ -39,7 +39,7 @@ test: $(STAMP) system-deps
 	$(BIN)/python -m pytest -m "not slow" -q
 
 test-slow: $(STAMP) system-deps
-	$(BIN)/python -m pytest -m slow -q
+	$(BIN)/python -m pytest -m slow -q --durations=25
 
 # The same suite with mujoco unimportable: MuJoCo is optional, so everything else must pass without it.
 # Training tests use PyBullet only and already ran in `make test`.
