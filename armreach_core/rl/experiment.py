@@ -179,8 +179,16 @@ class _Job:
     action: str
 
 
-#: What a run (or the IK reference) gives the experiment: training seconds, evaluation, its summary.
+#: What a run gives the experiment: training seconds (0 for the IK reference, which does not
+#: train), its evaluation and the evaluation's summary.
 Outcome = tuple[float, EvaluationResult, dict[str, Any]]
+
+
+def _evaluate(run_dir: Path, episodes: int, backend: str, seconds: float = 0.0) -> Outcome:
+    """Evaluate the run in ``run_dir`` (a trained run, or the IK reference's config) and save the
+    evaluation in its folder; ``seconds`` is its training wall-clock."""
+    evaluation = evaluate_run(run_dir, episodes=episodes, backend=backend)
+    return seconds, evaluation, save_evaluation(evaluation, run_dir / f"eval-{backend}")
 
 
 def _train_and_evaluate(
@@ -192,9 +200,7 @@ def _train_and_evaluate(
         trained = train(job.config, job.run_dir, resume=job.action != "training", stream=stream, command=command)
         if trained.interrupted:
             raise KeyboardInterrupt
-    seconds = training_seconds(job.run_dir, time.perf_counter() - t0)
-    evaluation = evaluate_run(job.run_dir, episodes=episodes, backend=backend)
-    return seconds, evaluation, save_evaluation(evaluation, job.run_dir / f"eval-{backend}")
+    return _evaluate(job.run_dir, episodes, backend, training_seconds(job.run_dir, time.perf_counter() - t0))
 
 
 def _longest_first(job: _Job) -> tuple[bool, int]:
@@ -202,13 +208,6 @@ def _longest_first(job: _Job) -> tuple[bool, int]:
     (off-policy: the `fast` SAC at about 350 env steps/s where PPO runs at 2,000-3,500) first,
     then the larger budgets, so that no long run starts last while the other workers idle."""
     return (not job.config.off_policy, -job.config.timesteps)
-
-
-def _evaluate_reference(run_dir: Path, episodes: int, backend: str) -> Outcome:
-    """Evaluate the IK reference whose config is in ``run_dir``, saving the evaluation there."""
-    t0 = time.perf_counter()
-    evaluation = evaluate_run(run_dir, episodes=episodes, backend=backend)
-    return time.perf_counter() - t0, evaluation, save_evaluation(evaluation, run_dir / f"eval-{backend}")
 
 
 def _run_jobs(
@@ -233,7 +232,7 @@ def _run_jobs(
         for job in jobs:
             _log(stream, f"{job.action} {job.label}, seed {job.seed}: {job.run_dir}")
             yield job, _train_and_evaluate(job, episodes, backend, stream, command)
-        yield None, _evaluate_reference(reference, episodes, backend)
+        yield None, _evaluate(reference, episodes, backend)
         return
     context = multiprocessing.get_context("spawn")
     with concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
@@ -242,7 +241,7 @@ def _run_jobs(
             job = jobs[i]
             _log(stream, f"{job.action} {job.label}, seed {job.seed}: {job.run_dir}")
             futures[i] = pool.submit(_train_and_evaluate, job, episodes, backend, None, command)
-        last = pool.submit(_evaluate_reference, reference, episodes, backend)
+        last = pool.submit(_evaluate, reference, episodes, backend)
         try:
             for i, job in enumerate(jobs):
                 yield job, futures[i].result()
