@@ -176,6 +176,29 @@ def test_off_policy_agents_use_fused_adam_also_after_loading(tmp_path: Path, tin
     env.close()
 
 
+def test_a_model_without_tensorboard_leaves_no_folder_in_the_temporary_folder(
+    tmp_path: Path, tiny: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """SB3 logs a model built without a TensorBoard folder into a fresh ``SB3-<time>`` folder of
+    the system's temporary folder at every ``learn()``; ``armreach bench`` builds such models."""
+    import tempfile
+
+    from armreach_core.rl.agents import build_model, make_vec_env
+    from armreach_core.rl.config import resolve_config
+
+    scratch = tmp_path / "system-tmp"
+    scratch.mkdir()
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    config = resolve_config(algo="ppo", preset=tiny, learner="sb3")
+    env = make_vec_env(config, tmp_path / "run", 0, 1, append=False)
+    model = build_model("ppo", config.settings, env, 0, None, "cpu")
+    model.learn(int(config.settings["n_steps"]))
+    env.close()
+    assert model.num_timesteps >= int(config.settings["n_steps"])
+    assert not list(scratch.glob("SB3-*"))
+
+
 def test_ik_reference_reaches_every_target(tmp_path: Path) -> None:
     run_dir = tmp_path / "ik"
     assert main(["train", "--algo", "ik", "--out", str(run_dir)]) == 0

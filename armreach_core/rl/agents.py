@@ -190,7 +190,12 @@ def build_model(
         # The paper's PPO batch (300) does not divide its rollout (2048); SB3 warns and
         # uses a short last mini-batch, which is what the paper's setting means.
         warnings.filterwarnings("ignore", message=".*mini-batch size.*", category=UserWarning)
-        return cls(policy_name, env, **kwargs)
+        model = cls(policy_name, env, **kwargs)
+    if tb_dir is None:  # SB3 would otherwise make an empty /tmp/SB3-<time> folder at every learn()
+        from stable_baselines3.common.logger import Logger
+
+        model.set_logger(Logger(folder=None, output_formats=[]))
+    return model
 
 
 class SB3Agent:
