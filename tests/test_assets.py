@@ -55,13 +55,16 @@ def test_wheel_ships_the_assets(tmp_path):
         shutil.copy2(ROOT / name, source / name)
     for name in ("armreach_core", "assets"):
         shutil.copytree(ROOT / name, source / name, ignore=skip)
-    command = [sys.executable, "-m", "pip", "wheel", str(source), "--no-deps", "--no-build-isolation", "-q"]
-    subprocess.run([*command, "-w", str(tmp_path)], check=True, capture_output=True)
+    command = [sys.executable, "-m", "pip", "wheel", str(source), "--no-deps", "--no-build-isolation", "-v"]
+    built = subprocess.run([*command, "-w", str(tmp_path)], check=True, capture_output=True, text=True)
+    # setuptools warns of each data folder importable as a package but left out of `packages`
+    assert "Package would be ignored" not in built.stdout + built.stderr
     (wheel,) = tmp_path.glob("armreach-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     assert "armreach_core/assets/ar6/ar6.urdf" in names
     assert "armreach_core/assets/ar6/README.md" in names
     assert "armreach_core/py.typed" in names
+    assert {"armreach_core/presets/fast.yaml", "armreach_core/presets/paper.yaml"} <= set(names)
     for module in ("robot/model.py", "plugins/builtin.py", "tasks/reach/env.py", "diagnostics/bench.py", "rl/train.py"):
         assert f"armreach_core/{module}" in names  # every layer's folder is a package of the wheel
     assert "armreach_core/tasks/reach/rl_zoo3.yml" in names
