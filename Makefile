@@ -38,8 +38,10 @@ install: $(STAMP) system-deps
 test: $(STAMP) system-deps
 	$(BIN)/python -m pytest -m "not slow" -q
 
+# Two slow tests at a time (pytest-xdist), one per core; those that time the machine run alone after.
 test-slow: $(STAMP) system-deps
-	$(BIN)/python -m pytest -m slow -q --durations=25
+	$(BIN)/python -m pytest -m "slow and not alone" -q -n 2 --durations=25
+	$(BIN)/python -m pytest -m "slow and alone" -q --durations=10
 
 # The same suite with mujoco unimportable: MuJoCo is optional, so everything else must pass without it.
 # Training tests use PyBullet only and already ran in `make test`.

@@ -42,6 +42,7 @@ def _share_of_ar6(arm: dict[str, Any]) -> float:
 
 
 @pytest.mark.slow
+@pytest.mark.alone
 @pytest.mark.skipif("pybullet" not in BACKENDS, reason="needs the PyBullet backend")
 @pytest.mark.parametrize(
     ("name", "least"),
