@@ -35,18 +35,22 @@ install: $(STAMP) system-deps
 
 # The everyday suite: a few minutes. Long integration runs (Ray sweeps, rl-zoo3, resumed
 # trainings, every corpus arm) are marked slow and run by `make test-slow` (CI's second step).
+# Both run TEST_JOBS tests at a time (pytest-xdist), then those marked `alone`, which time the
+# machine, by themselves.
+TEST_JOBS ?= 2
 test: $(STAMP) system-deps
-	$(BIN)/python -m pytest -m "not slow" -q
+	$(BIN)/python -m pytest -m "not slow and not alone" -q -n $(TEST_JOBS)
+	$(BIN)/python -m pytest -m "not slow and alone" -q
 
-# Two slow tests at a time (pytest-xdist), one per core; those that time the machine run alone after.
 test-slow: $(STAMP) system-deps
-	$(BIN)/python -m pytest -m "slow and not alone" -q -n 2 --durations=25
+	$(BIN)/python -m pytest -m "slow and not alone" -q -n $(TEST_JOBS) --durations=25
 	$(BIN)/python -m pytest -m "slow and alone" -q --durations=10
 
 # The same suite with mujoco unimportable: MuJoCo is optional, so everything else must pass without it.
 # Training tests use PyBullet only and already ran in `make test`.
 test-no-mujoco: $(STAMP)
-	ARMREACH_TEST_HIDE=mujoco $(BIN)/python -m pytest -m "not slow and not training" -q
+	ARMREACH_TEST_HIDE=mujoco $(BIN)/python -m pytest -m "not slow and not training and not alone" -q -n $(TEST_JOBS)
+	ARMREACH_TEST_HIDE=mujoco $(BIN)/python -m pytest -m "not slow and not training and alone" -q
 
 # The env, its checks and the plugins on the oldest Python armreach supports (3.10), where one
 # is installed: core, backends and grasp, no training stack (the CPU torch wheel is 3.11's).

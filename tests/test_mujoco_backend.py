@@ -258,6 +258,7 @@ def test_holds_home_pose_against_gravity(seed):
     env.close()
 
 
+@pytest.mark.alone
 def test_env_creation_is_cached_and_cheap():
     """An env of an arm already compiled skips the compile: measured 1.3-1.6 ms against 5.3-6.1 ms
     after ``compiled.clear_cache()`` (3.8-4.0 times as long), three runs of this test's timing."""

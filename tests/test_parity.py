@@ -539,6 +539,7 @@ STEPS_PER_SECOND = {"pybullet": 700.0, "mujoco": 1100.0}
 
 
 @needs_both
+@pytest.mark.alone
 def test_parity_command_writes_report_json_and_plot(tmp_path, capsys):
     """The command on xArm6 (``--urdf``, ``--ee-link``) with seed 1: its report holds the numbers
     of its trajectories, and they are the engines' measured gaps (MEASURED)."""

@@ -23,6 +23,7 @@ FAST = ["--steps", "200", "--ik-episodes", "3", "--parity-steps", "0", "--backen
 LEAST_SHARE_OF_BARE = 0.45
 
 
+@pytest.mark.alone
 def test_the_bundled_arm_is_usable(tmp_path, capsys):
     assert main(["robot", *FAST, "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
