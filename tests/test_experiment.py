@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import concurrent.futures
 import csv
 import io
+import threading
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -14,7 +16,7 @@ from PIL import Image
 
 from armreach_core.cli import main
 from armreach_core.rl.evaluate import ENDINGS
-from armreach_core.rl.experiment import PAPER, REWARD_WINDOW, Contender, run_experiment
+from armreach_core.rl.experiment import PAPER, REWARD_WINDOW, Contender, run_experiment, when_a_worker_idles
 from armreach_core.rl.report import IK_LABEL, write_report
 
 pytestmark = pytest.mark.training
@@ -153,6 +155,40 @@ def test_an_experiment_folder_is_not_silently_reused_with_other_settings(tmp_pat
         run_experiment(out, [Contender("DDPG", "ddpg", str(preset), steps=200)], episodes=1, eval_max_episode_steps=20)
 
 
+def test_the_idle_hook_waits_until_a_worker_has_nothing_left_to_take() -> None:
+    gates = [threading.Event() for _ in range(3)]
+    calls: list[int] = []
+    with concurrent.futures.ThreadPoolExecutor(3) as pool:
+        futures = [pool.submit(gate.wait, 30) for gate in gates]
+        helper = threading.Thread(
+            target=when_a_worker_idles, args=(futures, 2, lambda: calls.append(sum(f.done() for f in futures)))
+        )
+        helper.start()
+        gates[0].set()
+        futures[0].result()
+        helper.join(timeout=0.3)  # two runs left for two workers: both busy, still waiting
+        assert helper.is_alive() and calls == []
+        gates[1].set()
+        helper.join(timeout=30)
+        assert not helper.is_alive() and calls == [2]  # one run left: a worker is free
+        gates[2].set()
+
+
+def test_the_idle_hook_is_skipped_after_a_failure_and_its_own_error_is_not_raised(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    def fail() -> None:
+        raise RuntimeError("a run failed")
+
+    calls: list[str] = []
+    with concurrent.futures.ThreadPoolExecutor(2) as pool:
+        when_a_worker_idles([pool.submit(fail), pool.submit(int)], 2, lambda: calls.append("called"))
+        assert calls == []
+        with caplog.at_level("DEBUG", logger="armreach.experiment"):
+            when_a_worker_idles([pool.submit(int)], 2, lambda: 1 / 0)
+    assert "preparing while a worker idles failed" in caplog.text
+
+
 @pytest.mark.slow
 def test_runs_trained_side_by_side_give_the_runs_trained_one_after_another(tmp_path: Path) -> None:
     preset = tmp_path / "tiny.yaml"
@@ -163,9 +199,19 @@ def test_runs_trained_side_by_side_give_the_runs_trained_one_after_another(tmp_p
     for jobs in (1, 2):
         out = tmp_path / f"jobs{jobs}"
         log = io.StringIO()
+        evaluated_when_called: list[int] = []  # runs and reference with an evaluation saved, at the hook's call
+
+        def hook(out: Path = out, seen: list[int] = evaluated_when_called) -> None:
+            seen.append(len(list(out.glob("*/eval-pybullet/summary.json"))))
+
         results, ik = run_experiment(
-            out, contenders, seeds=2, episodes=2, stream=log, eval_max_episode_steps=40, jobs=jobs
-        )
+            out, contenders, seeds=2, episodes=2, stream=log, eval_max_episode_steps=40, jobs=jobs,
+            when_a_core_frees=hook,
+        )  # fmt: skip
+        if jobs == 1:  # one process: no worker ever idles
+            assert evaluated_when_called == []
+        else:  # called once, when a worker had nothing left: 4 of the 5 (or all) had finished
+            assert len(evaluated_when_called) == 1 and evaluated_when_called[0] >= 4
         assert [r.seeds for r in results] == [[0, 1], [0, 1]]
         assert log.getvalue().count("training") == 4
         if jobs == 2:  # side by side, the runs with a gradient step per env step start first

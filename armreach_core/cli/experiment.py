@@ -60,7 +60,7 @@ def _steps(text: str) -> tuple[str | None, int]:
 def run(args: argparse.Namespace) -> int:
     from armreach_core.rl import runs
     from armreach_core.rl.experiment import paper_contenders, run_experiment
-    from armreach_core.rl.report import write_report
+    from armreach_core.rl.report import warm_up, write_report
 
     check_out(args.out)
     check_backends([args.backend])
@@ -79,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
             stream=sys.stderr,
             command=args.command_line,
             jobs=args.jobs,
+            when_a_core_frees=warm_up,
         )
     except KeyboardInterrupt:
         print(

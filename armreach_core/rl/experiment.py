@@ -9,10 +9,12 @@ number in ``report.md`` can be traced to a run.
 from __future__ import annotations
 
 import concurrent.futures
+import logging
 import multiprocessing
 import sys
+import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -32,6 +34,8 @@ from armreach_core.rl.monitor import training_progress as training_progress  # w
 from armreach_core.rl.stats import Interval, iqm_interval
 from armreach_core.rl.train import train
 from armreach_core.rl.validation import stopped_early
+
+log = logging.getLogger("armreach.experiment")
 
 #: The paper's numbers (Tables 2-4): PPO and DDPG, 614,400 steps, 100 evaluation episodes.
 PAPER = {
@@ -210,6 +214,23 @@ def _longest_first(job: _Job) -> tuple[bool, int]:
     return (not job.config.off_policy, -job.config.timesteps)
 
 
+def when_a_worker_idles(
+    futures: Iterable[concurrent.futures.Future[Any]], workers: int, hook: Callable[[], object]
+) -> None:
+    """Wait until fewer of ``futures`` are left running than there are ``workers`` (a process
+    has nothing left to do), then call ``hook``; an error in it is logged, not raised."""
+    everything = list(futures)
+    pending = set(everything)
+    while len(pending) >= workers:
+        _, pending = concurrent.futures.wait(pending, return_when=concurrent.futures.FIRST_COMPLETED)
+    if any(f.cancelled() or f.exception() is not None for f in everything if f.done()):
+        return  # stopped (Ctrl-C) or failed: nothing more to prepare
+    try:
+        hook()
+    except Exception:
+        log.debug("preparing while a worker idles failed", exc_info=True)
+
+
 def _run_jobs(
     jobs: list[_Job],
     workers: int,
@@ -218,6 +239,7 @@ def _run_jobs(
     stream: TextIO | None,
     command: list[str] | None,
     reference: Path,
+    idle: Callable[[], object] | None = None,
 ) -> Iterator[tuple[_Job | None, Outcome]]:
     """Each job's outcome, in the jobs' order, then the IK reference's (job ``None``, evaluated
     from its folder ``reference``): one after another, or ``workers`` processes side by side,
@@ -226,7 +248,8 @@ def _run_jobs(
 
     Side by side, each run trains in a process of its own (one torch and XLA thread each, the
     training default) and shows no progress bar; Ctrl-C stops them all, each keeping its
-    checkpoint, so that the same command resumes.
+    checkpoint, so that the same command resumes. ``idle`` is called once, in a thread of this
+    process, when a worker has no run left to take (:func:`when_a_worker_idles`).
     """
     if workers <= 1:
         for job in jobs:
@@ -242,6 +265,10 @@ def _run_jobs(
             _log(stream, f"{job.action} {job.label}, seed {job.seed}: {job.run_dir}")
             futures[i] = pool.submit(_train_and_evaluate, job, episodes, backend, None, command)
         last = pool.submit(_evaluate, reference, episodes, backend)
+        helper = None
+        if idle is not None:
+            helper = threading.Thread(target=when_a_worker_idles, args=([*futures.values(), last], workers, idle))
+            helper.start()
         try:
             for i, job in enumerate(jobs):
                 yield job, futures[i].result()
@@ -249,6 +276,9 @@ def _run_jobs(
         except BaseException:
             pool.shutdown(wait=True, cancel_futures=True)
             raise
+        finally:
+            if helper is not None:
+                helper.join()
 
 
 def run_experiment(
@@ -262,10 +292,13 @@ def run_experiment(
     eval_max_episode_steps: int = 2048,
     command: list[str] | None = None,
     jobs: int = 1,
+    when_a_core_frees: Callable[[], object] | None = None,
 ) -> tuple[list[ContenderResult], EvaluationResult]:
     """Train and evaluate every contender for every seed (reusing finished runs), then the IK reference.
 
-    ``jobs``: how many runs train at once, each in a process of its own.
+    ``jobs``: how many runs train at once, each in a process of its own. ``when_a_core_frees``:
+    with ``jobs`` > 1, called once in a thread of this process when a worker has no run left
+    (the report's imports, which then cost the last run nothing).
     """
     if seeds < 1:
         raise ConfigError(f"--seeds must be >= 1, got {seeds}")
@@ -296,7 +329,8 @@ def run_experiment(
     runs.write_config(ik_dir, ik_config)
     results = [ContenderResult(contender) for contender in contenders]
     ik: EvaluationResult | None = None
-    for job, (seconds, evaluation, summary) in _run_jobs(planned, jobs, episodes, backend, stream, command, ik_dir):
+    outcomes = _run_jobs(planned, jobs, episodes, backend, stream, command, ik_dir, when_a_core_frees)
+    for job, (seconds, evaluation, summary) in outcomes:
         if job is None:
             ik = evaluation
             continue
