@@ -199,6 +199,31 @@ def test_a_model_without_tensorboard_leaves_no_folder_in_the_temporary_folder(
     assert not list(scratch.glob("SB3-*"))
 
 
+@pytest.mark.slow
+def test_a_second_sbx_run_reads_back_what_the_first_compiled(tmp_path: Path, tiny: str) -> None:
+    """SBX compiles its updates for every new model; armreach keeps XLA's programs in its cache
+    folder, so the same training again compiles nothing new (the cache gains no entry)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("JAX_")}  # no cache chosen by the user
+    env["XDG_CACHE_HOME"] = str(tmp_path / "cache")
+    xla = tmp_path / "cache" / "armreach" / "xla"
+    cmd = [sys.executable, "-m", "armreach_core.cli", "train", "--algo", "ddpg", "--preset", tiny, "--steps", "100"]
+    entries = []
+    for run in ("first", "second"):
+        subprocess.run([*cmd, "--out", str(tmp_path / run)], check=True, env=env, capture_output=True)
+        entries.append(sorted(p.name for p in xla.iterdir()))
+    assert len(entries[0]) > 10  # the networks' initialisation and the updates
+    assert entries[1] == entries[0]
+
+
+def test_a_cache_the_user_chose_is_left_alone(monkeypatch: pytest.MonkeyPatch) -> None:
+    from armreach_core.rl.learners import use_xla_cache
+
+    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", "")  # none
+    before = dict(os.environ)
+    use_xla_cache()
+    assert dict(os.environ) == before
+
+
 def test_ik_reference_reaches_every_target(tmp_path: Path) -> None:
     run_dir = tmp_path / "ik"
     assert main(["train", "--algo", "ik", "--out", str(run_dir)]) == 0

@@ -23,6 +23,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from armreach_core.errors import ConfigError
+from armreach_core.robot.hulls import cache_dir
 
 if TYPE_CHECKING:
     import numpy.typing as npt
@@ -191,13 +192,43 @@ def policy_parameters(model: BaseAlgorithm) -> dict[str, npt.NDArray[Any]]:
     return arrays
 
 
-def configure_xla(threads: int = 1) -> None:
-    """Ask XLA (JAX's compiler) for ``threads`` CPU threads, unless the user set ``XLA_FLAGS``.
+#: JAX's persistent compilation cache, in armreach's cache folder: SBX compiles its updates
+#: again for every new model (each run, resumed run and evaluation), seconds on 2 cores, and
+#: with the cache reads back what an earlier process compiled. Every program is kept (no
+#: minimum compile time or size); the size limit makes JAX lock the folder, so processes
+#: training side by side share it.
+XLA_CACHE_KIND = "xla"
+XLA_CACHE_SETTINGS = {
+    "jax_persistent_cache_min_compile_time_secs": 0.0,
+    "jax_persistent_cache_min_entry_size_bytes": 0,
+    "jax_compilation_cache_max_size": 2**29,
+}
 
-    Takes effect only before JAX is imported (XLA reads its flags once): a run's
+
+def use_xla_cache() -> None:
+    """Keep what XLA compiles in armreach's cache folder (:data:`XLA_CACHE_KIND`), unless the
+    user chose a cache (``JAX_COMPILATION_CACHE_DIR``, an empty value for none)."""
+    if "JAX_COMPILATION_CACHE_DIR" in os.environ:
+        return
+    settings = {"jax_compilation_cache_dir": str(cache_dir(XLA_CACHE_KIND)), **XLA_CACHE_SETTINGS}
+    if "jax" in sys.modules:
+        import jax
+
+        for name, value in settings.items():
+            jax.config.update(name, value)  # type: ignore[no-untyped-call]
+    else:  # read by JAX when it starts, here and in the processes this one starts
+        os.environ.update({name.upper(): str(value) for name, value in settings.items()})
+
+
+def configure_xla(threads: int = 1) -> None:
+    """Ask XLA (JAX's compiler) for ``threads`` CPU threads, unless the user set ``XLA_FLAGS``,
+    and keep what it compiles (:func:`use_xla_cache`).
+
+    The threads take effect only before JAX is imported (XLA reads its flags once): a run's
     ``check_settings`` sets it from the run's thread count before anything imports SBX.
     One thread by default, as for torch.
     """
+    use_xla_cache()
     if not _USER_XLA_FLAGS and "jax" not in sys.modules:
         os.environ["XLA_FLAGS"] = (
             f"--xla_cpu_multi_thread_eigen={'true' if threads > 1 else 'false'} intra_op_parallelism_threads={threads}"
