@@ -388,6 +388,7 @@ def assert_continued(run_dir: Path, kept: str, total: int) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.alone  # Ray starts a worker per core: beside another test its deadlines run short
 def test_local_sweep_runs_every_trial_into_a_run_folder_and_one_report(tmp_path: Path) -> None:
     from armreach_core.rl.evaluate import evaluate_run
 
@@ -420,6 +421,7 @@ def test_local_sweep_runs_every_trial_into_a_run_folder_and_one_report(tmp_path:
 
 
 @pytest.mark.slow
+@pytest.mark.alone  # Ray starts a worker per core: beside another test its deadlines run short
 def test_sweep_runs_across_the_nodes_of_a_cluster(tmp_path: Path) -> None:
     spec_path = _spec(tmp_path, name="cluster", algos=["sac"], seeds=2, steps=200, episodes=1)
     out = tmp_path / "out"
@@ -443,6 +445,7 @@ def test_sweep_runs_across_the_nodes_of_a_cluster(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.alone  # Ray starts a worker per core: beside another test its deadlines run short
 def test_a_trial_whose_worker_dies_is_retried_from_its_checkpoint(tmp_path: Path) -> None:
     preset = tmp_path / "slow-ppo.yaml"
     preset.write_text(yaml.safe_dump({"reach": {"ppo": SLOW_PPO}}))
@@ -459,6 +462,7 @@ def test_a_trial_whose_worker_dies_is_retried_from_its_checkpoint(tmp_path: Path
 
 
 @pytest.mark.slow
+@pytest.mark.alone  # Ray starts a worker per core: beside another test its deadlines run short
 def test_killed_sweep_resumes_without_losing_or_repeating_trials(tmp_path: Path) -> None:
     preset = tmp_path / "slow-ppo.yaml"
     preset.write_text(yaml.safe_dump({"reach": {"ppo": SLOW_PPO}}))

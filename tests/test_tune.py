@@ -173,6 +173,7 @@ def _trial_folders(out: Path) -> dict[str, Path]:
 
 
 @pytest.mark.slow
+@pytest.mark.alone  # Ray starts a worker per core: beside another test its deadlines run short
 def test_tune_command_searches_and_writes_the_best_settings_as_a_preset(tmp_path: Path) -> None:
     optuna = pytest.importorskip("optuna")
     from armreach_core.rl.config import resolve_config
@@ -200,6 +201,7 @@ def test_tune_command_searches_and_writes_the_best_settings_as_a_preset(tmp_path
 
 
 @pytest.mark.slow
+@pytest.mark.alone  # Ray starts a worker per core: beside another test its deadlines run short
 def test_tune_resume_continues_a_killed_search_without_repeating_finished_trials(tmp_path: Path) -> None:
     pytest.importorskip("optuna")
     out = tmp_path / "tune"
