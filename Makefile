@@ -35,8 +35,8 @@ install: $(STAMP) system-deps
 
 # The everyday suite: a few minutes. Long integration runs (Ray sweeps, rl-zoo3, resumed
 # trainings, every corpus arm) are marked slow and run by `make test-slow` (CI's second step).
-# Both run TEST_JOBS tests at a time (pytest-xdist), then those marked `alone`, which time the
-# machine, by themselves.
+# Both run TEST_JOBS tests at a time (pytest-xdist), then those marked `alone` (they time the
+# machine or start a Ray worker per core) by themselves.
 TEST_JOBS ?= 2
 test: $(STAMP) system-deps
 	$(BIN)/python -m pytest -m "not slow and not alone" -q -n $(TEST_JOBS)
