@@ -103,12 +103,11 @@ def xla_compilation_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[
     if "JAX_COMPILATION_CACHE_DIR" in os.environ:
         yield
         return
-    settings = {
-        "jax_compilation_cache_dir": str(tmp_path_factory.mktemp("xla-cache")),
-        "jax_persistent_cache_min_compile_time_secs": 0,
-        "jax_persistent_cache_min_entry_size_bytes": 0,
-        "jax_compilation_cache_max_size": 2**30,  # a size limit makes JAX lock the folder: processes share it
-    }
+    from armreach_core.rl.learners import XLA_CACHE_SETTINGS
+
+    # The library's settings (every program kept; a size limit, so processes share the folder
+    # under JAX's lock) in a folder of the session's own.
+    settings = {"jax_compilation_cache_dir": str(tmp_path_factory.mktemp("xla-cache")), **XLA_CACHE_SETTINGS}
     with pytest.MonkeyPatch.context() as patch:
         for name, value in settings.items():
             patch.setenv(name.upper(), str(value))

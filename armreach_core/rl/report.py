@@ -259,20 +259,15 @@ def _cpu_count() -> int:
 def warm_up() -> None:
     """Import what :func:`write_report` needs (matplotlib, SciPy's statistics, Pillow): run while
     a core is free, it spares the report their import after the last run."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot
     import scipy.stats  # noqa: F401
     from PIL import Image  # noqa: F401
+
+    import armreach_core.plotting  # noqa: F401
 
 
 def write_figures(out: Path, results: list[ContenderResult], ik: EvaluationResult) -> list[tuple[str, str]]:
     """Learning curves (Fig. 2), jerk over time (Fig. 4), a successful rollout (Fig. 3, PNG + GIF)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from armreach_core.plotting import pyplot as plt
 
     figures: list[tuple[str, str]] = []
     fig, ax = plt.subplots(figsize=(7, 4))

@@ -170,10 +170,7 @@ def write_outputs(cells: Sequence[Cell], out: Path, *, title: str) -> list[Path]
 
 
 def _plots(cells: Sequence[Cell], out: Path) -> list[Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from armreach_core.plotting import pyplot as plt
 
     paths = []
     for key in dict.fromkeys(c.perturbation for c in cells):

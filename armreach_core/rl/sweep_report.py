@@ -153,10 +153,7 @@ def _time_split(rows: Sequence[Mapping[str, Any]]) -> list[str]:
 
 def plot_curves(path: Path, rows: Sequence[Mapping[str, Any]]) -> None:
     """Training success against env steps per cell: mean over seeds, with a min-max band."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from armreach_core.plotting import pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4))
     for cell, members in cells(rows).items():

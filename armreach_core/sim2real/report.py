@@ -107,10 +107,7 @@ def _markdown(data: dict[str, Any]) -> str:
 
 
 def _plot(result: Identification, joint_names: tuple[str, ...], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from armreach_core.plotting import pyplot as plt
 
     logged, before, after = result.traces[0]
     figure, axes = plt.subplots(len(joint_names), 1, figsize=(10, 1.8 * len(joint_names)), sharex=True, squeeze=False)

@@ -75,10 +75,7 @@ def shadow(
 
 def plot_shadow(result: Shadow, joint_names: tuple[str, ...], path: Path) -> Path:
     """Per joint: the live arm, the policy's live targets and the twin; below, the gap, with where they part."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from armreach_core.plotting import pyplot as plt
 
     n = len(joint_names)
     figure, axes = plt.subplots(n + 1, 1, figsize=(10, 1.6 * (n + 1)), sharex=True, squeeze=False)
