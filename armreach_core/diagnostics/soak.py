@@ -178,7 +178,9 @@ def _cycles(backend: str, cycles: int, seed: int, progress: Callable[[str], None
         gc.collect()
 
     clients_before = live_clients() if live_clients is not None else None
-    warmup = min(max(cycles // 10, 1), 20)
+    # at least three: freeing the first env can move where the allocator puts the next ones (glibc
+    # raises its mmap threshold), a one-time step of about one env (29 MB on PyBullet) seen after one
+    warmup = min(max(cycles // 10, 3), 20)
     for _ in range(warmup):
         cycle()
     gc.collect()
