@@ -28,14 +28,10 @@ import traceback
 import warnings
 from typing import Any
 
+from tests.hidden_modules import hide
+
 #: Poses the reachability map of each robot is drawn from: one batch (the map draws 20 000 at a time).
 MAP_SAMPLES = 20_000
-
-
-def _hide_modules() -> None:
-    for name in os.environ.get("ARMREACH_TEST_HIDE", "").split(","):
-        if name.strip():
-            sys.modules[name.strip()] = None  # type: ignore[assignment]
 
 
 def _refused(stage: str, exc: Exception) -> dict[str, str]:
@@ -101,7 +97,7 @@ def _with_full_map(request: dict[str, Any], samples: int) -> dict[str, str]:
 
 
 def main() -> None:
-    _hide_modules()
+    hide()
     warnings.simplefilter("error")
     warnings.filterwarnings("ignore", category=DeprecationWarning, module="pybullet_utils.*")
     warnings.filterwarnings("ignore", message=".*pkg_resources.*", category=DeprecationWarning)

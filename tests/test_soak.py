@@ -28,13 +28,11 @@ pytestmark = [
 RSS_GROWTH_MB = 2.0
 
 
-#: ``armreach soak`` in a process of its own, with the modules this run hides
-#: (``ARMREACH_TEST_HIDE``, the root ``conftest.py``) hidden there too.
+#: ``armreach soak`` in a process of its own, with the modules this run hides hidden there too.
 SOAK_IN_A_PROCESS = (
-    "import os, sys\n"
-    "for name in os.environ.get('ARMREACH_TEST_HIDE', '').split(','):\n"
-    "    if name.strip():\n"
-    "        sys.modules[name.strip()] = None\n"
+    "import sys\n"
+    "from tests.hidden_modules import hide\n"
+    "hide()\n"
     "from armreach_core.cli import main\n"
     "sys.exit(main(sys.argv[1:]))\n"
 )
@@ -46,6 +44,7 @@ def test_soak_command_reports_every_backend_as_json():
     args = ["soak", "--steps", "400", "--cycles", "12", "--episode-steps", "50", "--json"]
     result = subprocess.run(
         [sys.executable, "-c", SOAK_IN_A_PROCESS, *args],
+        cwd=Path(__file__).resolve().parent.parent,  # where `tests` imports from
         capture_output=True,
         text=True,
         timeout=300,
