@@ -126,3 +126,20 @@ def test_a_revolute_jaw_off_the_chain_leaves_the_wrist_beside_it_on_the_arm(tmp_
     assert robot.joint_names[-1] == "wrist_3_joint" and robot.dof == 6
     assert robot.ee_link == "tool0" and [j.name for j in robot.held_joints] == ["j_side"]
     assert "'j_side' is a finger off the chain at 'wrist_2_link': 'wrist_3_joint' moves the tool centre" in caplog.text
+
+
+def test_of_nested_tool_centres_the_one_at_the_end_of_the_chain_of_frames_wins(tmp_path, caplog):
+    # an iiwa as another source publishes it: a marker frame iiwa_link_ee_x 4.5 cm off the flange's
+    # axis, and the tool centre iiwa_link_ee hung from that marker, back on the axis
+    iiwa = Description("kuka-iiwa").add("fixed", "iiwa_joint_ee_x", "lbr_iiwa_link_7", "iiwa_link_ee_x", "0.045 0 0")
+    iiwa.add("fixed", "iiwa_joint_ee", "iiwa_link_ee_x", "iiwa_link_ee", "-0.045 0 0.045")
+    robot = _build(iiwa.write(tmp_path), caplog)
+    assert robot.ee_link == "iiwa_link_ee" and robot.arm_dof == 7
+    assert "tool centre 'iiwa_link_ee' hangs from 'iiwa_link_ee_x' through fixed joints, so it wins" in caplog.text
+    # the same two frames side by side, both hung from the flange: a real tie
+    iiwa.rehang("iiwa_joint_ee", "lbr_iiwa_link_7", "0 0 0.045")
+    with pytest.raises(URDFError, match="ambiguous") as info:
+        RobotModel(iiwa.write(tmp_path, "siblings.urdf"), allow_external_meshes=True)
+    assert "'iiwa_link_ee_x', 'iiwa_link_ee'" in str(info.value) or "'iiwa_link_ee', 'iiwa_link_ee_x'" in str(
+        info.value
+    )

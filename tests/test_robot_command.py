@@ -56,11 +56,13 @@ def test_an_arm_held_in_the_ground_exits_1_with_the_flag_that_fixes_it(tmp_path,
     assert json.loads((tmp_path / "auto" / "robot.json").read_text())["usable"] is True
     capsys.readouterr()
     args = [*FAST, "--base-position", "0", "0", "0", "--out", str(tmp_path / "out")]
-    assert main(["robot", str(sunk), *args]) == 1
+    assert main(["robot", "--urdf", str(sunk), *args]) == 1  # the flag the other commands take works too
     out = capsys.readouterr().out
     assert "Cannot be used as it is" in out
     assert "--base-position 0 0 0." in out
     assert not (tmp_path / "out" / "robot.png").exists()
+    assert main(["robot", str(ar6_urdf), "--urdf", str(sunk), *args]) == 2
+    assert f"two URDFs were given, {ar6_urdf} and --urdf {sunk}; give one" in capsys.readouterr().err
 
 
 def test_arm_flags_reach_the_run_and_its_evaluation(tmp_path):

@@ -370,3 +370,29 @@ def test_a_mimic_joint_on_the_chain_names_its_master(tmp_path):
     body = ARM + MIMIC.format("f", "c", "d", '<mimic joint="j2"/>')
     with pytest.raises(URDFError, match="joint 'f' on the chain to 'd' is a mimic joint \\(it follows 'j2'\\)"):
         RobotModel(_write(tmp_path, body), ee_link="d")
+
+
+def test_another_tools_extensions_under_an_undeclared_prefix_are_dropped_with_a_warning(tmp_path, ar6_urdf, caplog):
+    """Drake's URDFs put ``drake:acceleration`` on ``<limit>`` without declaring ``xmlns:drake``
+    (ROS's parser reads past it): the arm builds, the extensions reach no engine, the user is told."""
+    text = ar6_urdf.read_text()
+    marked = text.replace("<limit ", '<limit drake:acceleration="2.5" ', 2)
+    marked = marked.replace(
+        "</robot>",
+        '<drake:collision_filter_group name="g"><drake:member link="base_link"/>'
+        "</drake:collision_filter_group></robot>",
+    )
+    assert marked.count("drake:") == 5
+    path = tmp_path / "drake.urdf"
+    path.write_text(marked)
+    with caplog.at_level("WARNING", logger="armreach.robot"):
+        parsed = read_urdf(path)
+    assert b"drake" not in parsed.resolved_xml and b"xmlns" not in parsed.resolved_xml
+    assert parsed.resolved_xml == read_urdf(ar6_urdf).resolved_xml
+    assert "uses the XML prefix 'drake' without declaring it" in caplog.text
+    assert "<drake:collision_filter_group> x1, drake:acceleration x2" in caplog.text
+    assert RobotModel(path).joint_names == RobotModel(ar6_urdf).joint_names
+    # an undeclared prefix beside a real syntax error: the file is still refused, naming the error
+    path.write_text(marked.replace("</robot>", "<link name='x'></robot>"))
+    with pytest.raises(URDFError, match="not well-formed XML"):
+        read_urdf(path)

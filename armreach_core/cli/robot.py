@@ -17,11 +17,15 @@ from armreach_core.cli.checks import (
     check_urdf,
 )
 from armreach_core.cli.robot_args import add_robot_arguments, description_kwargs, robot_kwargs
+from armreach_core.errors import ConfigError
 
 
 def add_parser(sub: Any) -> None:
     parser = sub.add_parser("robot", help="check an arm: joints, end effector, home, reach, cost, parity, IK")
     parser.add_argument("urdf", nargs="?", default=None, help="the arm's URDF (default: the bundled ar6)")
+    parser.add_argument(
+        "--urdf", dest="urdf_flag", default=None, metavar="URDF", help="the arm's URDF, as the other commands take it"
+    )
     add_robot_arguments(parser, urdf=False)
     parser.add_argument(
         "--backends", nargs="+", default=None, metavar="NAME", help="default: every installed one but variants"
@@ -51,6 +55,10 @@ def run(args: argparse.Namespace) -> int:
     from armreach_core.diagnostics.robot_page import markdown, save_robot
     from armreach_core.diagnostics.robot_report import inspect_robot
 
+    if args.urdf_flag is not None:
+        if args.urdf is not None and args.urdf != args.urdf_flag:
+            raise ConfigError(f"two URDFs were given, {args.urdf} and --urdf {args.urdf_flag}; give one")
+        args.urdf = args.urdf_flag
     check_corpus_flags(args, args.urdf)
     check_counts(steps=(args.steps, 1), ik_episodes=(args.ik_episodes, 1), parity_steps=(args.parity_steps, 0))
     check_backends(args.backends)

@@ -35,12 +35,15 @@ tool centre or the tip of the chain. When tool centres compete, one past the gri
 (below it in the tree, between the fingers: a WidowX's ``ee_gripper_link`` beats its
 ``ee_arm_link``) wins over those at or above the mount. Tips at the same position are
 equivalent (a UR's ``ee_link`` and ``tool0``): the first one in priority and URDF order is
-taken; tool centres of the same standing at different places are a real tie (an error).
+taken. Of tool centres of the same standing at different places, one hanging from the
+others through fixed joints wins (the end of a chain of tool frames: iiwa_link_ee below
+iiwa_link_ee_x); otherwise they are a real tie (an error).
 Every decision is kept with its reason (:attr:`EndEffector.decisions`) and logged.
 """
 
 from __future__ import annotations
 
+import itertools
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -353,6 +356,14 @@ class Tree:
                 ranked = past
         if ranked:
             best = [name for rank, _, name in ranked if rank == ranked[0][0]]
+            nested = sorted(best, key=self.order.index)  # breadth first: parents first
+            apart = any(np.linalg.norm(usable[name][:3, 3] - usable[best[0]][:3, 3]) > SAME_PLACE for name in best)
+            if apart and all(self._descends(b, a) for a, b in itertools.pairwise(nested)):
+                notes.append(
+                    f"tool centre {nested[-1]!r} hangs from {', '.join(map(repr, nested[:-1]))} through fixed joints, "
+                    "so it wins: the end of that chain of tool frames"
+                )
+                best = [nested[-1]]
             place = usable[best[0]][:3, 3]
             if any(np.linalg.norm(usable[name][:3, 3] - place) > SAME_PLACE for name in best):
                 spelled = "; ".join(f'ee_link="{c}" (Python) or --ee-link {c} (command line)' for c in best)

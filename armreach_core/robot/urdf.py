@@ -13,12 +13,15 @@ relative or absolute) are resolved to absolute paths here, once, so that every b
 loads the same files; files outside the URDF's folder or ROS package are refused unless
 the user opts in (:func:`resolve_mesh_path`). The text handed on is laid out one element
 per line: PyBullet's URDF reader cuts lines longer than :data:`MAX_LINE_BYTES`, which
-garbles a one-line (minified) URDF's names and numbers.
+garbles a one-line (minified) URDF's names and numbers. Another tool's extensions under an
+XML prefix the file never declares (Drake's ``drake:acceleration``: ROS's parser reads past
+them) are dropped with a warning rather than refused (:func:`_undeclared_prefixes`).
 """
 
 from __future__ import annotations
 
 import io
+import logging
 import os
 import re
 from collections.abc import Mapping
@@ -42,6 +45,11 @@ MAX_LINE_BYTES = 8191
 ALLOW_EXTERNAL_ENV = "ARMREACH_ALLOW_EXTERNAL_MESHES"
 
 _DTD_PATTERN = re.compile(rb"<!\s*(DOCTYPE|ENTITY)", re.IGNORECASE)
+_ROBOT_TAG = re.compile(rb"<robot(?=[\s/>])")
+#: Namespace given to a prefix a URDF uses without declaring it, so that its elements and
+#: attributes can be told apart and dropped.
+UNDECLARED_NAMESPACE = "urn:armreach:undeclared:"
+log = logging.getLogger("armreach.robot")
 
 
 @dataclass(frozen=True)
@@ -179,6 +187,65 @@ def _dtd_error(urdf_path: Path) -> URDFError:
     )
 
 
+def _undeclared_prefixes(parser: etree.XMLParser) -> list[str]:
+    """The XML prefixes a file ``parser`` failed on uses undeclared, if that is all that is wrong with it."""
+    errors = list(parser.error_log)  # the parser's own: an exception's log also holds the thread's earlier errors
+    if not errors or any(e.type != etree.ErrorTypes.NS_ERR_UNDEFINED_NAMESPACE for e in errors):
+        return []
+    found = (re.match(r"Namespace prefix (\S+) ", e.message) for e in errors)
+    return sorted({m.group(1) for m in found if m is not None and re.fullmatch(r"[A-Za-z_][\w.-]*", m.group(1))})
+
+
+def _prefixed(key: str) -> str:
+    """``{urn:armreach:undeclared:drake}acceleration`` -> ``drake:acceleration``."""
+    name = etree.QName(key)
+    return f"{str(name.namespace)[len(UNDECLARED_NAMESPACE) :]}:{name.localname}"
+
+
+def _parse(data: bytes, urdf_path: Path) -> etree._Element:
+    """``data`` parsed; elements and attributes under prefixes it never declares are dropped, with a warning."""
+    parser = _safe_parser()
+    try:
+        return etree.fromstring(data, parser=parser)
+    except etree.XMLSyntaxError as exc:
+        error = URDFError(
+            f"URDF file {str(urdf_path)!r} is not well-formed XML: {exc}; fix the markup at that line and column "
+            "(a truncated file, a stray byte or an unclosed tag)"
+        )
+        prefixes = _undeclared_prefixes(parser)
+        tag = _ROBOT_TAG.search(data)
+        if not prefixes or tag is None:
+            raise error from None
+    declared = b"".join(f' xmlns:{p}="{UNDECLARED_NAMESPACE}{p}"'.encode() for p in prefixes)
+    try:
+        root = etree.fromstring(data[: tag.end()] + declared + data[tag.end() :], parser=_safe_parser())
+    except etree.XMLSyntaxError:
+        raise error from None
+    dropped: dict[str, int] = {}
+    ours = "{" + UNDECLARED_NAMESPACE
+    for element in root.iter():
+        for key in [str(k) for k in element.attrib if str(k).startswith(ours)]:
+            dropped[_prefixed(key)] = dropped.get(_prefixed(key), 0) + 1
+            del element.attrib[key]
+    outer = [e for e in root.iter() if isinstance(e.tag, str) and e.tag.startswith(ours) and e is not root]
+    for element in outer:
+        parent = element.getparent()
+        if parent is not None and not (isinstance(parent.tag, str) and parent.tag.startswith(ours)):
+            dropped[f"<{_prefixed(element.tag)}>"] = dropped.get(f"<{_prefixed(element.tag)}>", 0) + 1
+            parent.remove(element)
+    etree.cleanup_namespaces(root)
+    log.warning(
+        "URDF file %r uses the XML prefix%s %s without declaring %s: another tool's extensions (%s), which no engine "
+        "here reads; dropped",
+        str(urdf_path),
+        "es" if len(prefixes) > 1 else "",
+        ", ".join(repr(p) for p in prefixes),
+        "them" if len(prefixes) > 1 else "it",
+        ", ".join(f"{name} x{count}" for name, count in sorted(dropped.items())),
+    )
+    return root
+
+
 def _laid_out(root: etree._Element, urdf_path: Path) -> bytes:
     """``root`` as UTF-8 text, one element per line, every line at most :data:`MAX_LINE_BYTES`."""
     etree.indent(root, space=" ")  # only whitespace between elements changes
@@ -247,13 +314,7 @@ def read_urdf(
         raise URDFError(
             f"xacro_args were given but {str(urdf_path)!r} is not a xacro file (no xacro markup); drop the arguments"
         )
-    try:
-        root = etree.fromstring(data, parser=_safe_parser())
-    except etree.XMLSyntaxError as exc:
-        raise URDFError(
-            f"URDF file {str(urdf_path)!r} is not well-formed XML: {exc}; fix the markup at that line and column "
-            "(a truncated file, a stray byte or an unclosed tag)"
-        ) from None
+    root = _parse(data, urdf_path)
     if root.getroottree().docinfo.internalDTD is not None:  # in an encoding the byte scan does not read (UTF-16)
         raise _dtd_error(urdf_path)
     if not isinstance(root.tag, str) or etree.QName(root).localname != "robot":
