@@ -25,6 +25,7 @@ from armreach_core.robot.statics import (
     BARE_LINK_MASS,
     HOLD_MARGIN,
     SIZING_POSES,
+    bare_mass,
     carried_torques,
     effort_ratio,
     gravity_torques,
@@ -111,16 +112,21 @@ def test_kr210_motors_are_sized_from_its_masses() -> None:
     assert effort_ratio(robot, robot.home).max() <= HOLD_MARGIN
 
 
-def test_sized_motors_carry_the_links_without_inertials_as_the_engines_load_them() -> None:
-    """Vega's lift carries 20.1 kg of inertials and six bare frames the engines load as 1 kg
-    each: sized for 20.1 kg (247 N), its motor never lifted the 26.1 kg the engines simulate."""
+def test_sized_motors_carry_what_the_engines_simulate_and_no_frame() -> None:
+    """Vega's lift carries 20.1 kg of inertials and six frames without ``<inertial>`` (cameras,
+    hand frames), which weigh nothing on the engines: its motor is sized for the 20.1 kg. A link
+    without ``<inertial>`` on a joint of its own weighs BARE_LINK_MASS on both, and is carried."""
     robot = _robot("vega-1u-left")
     poses = robot.sample_configurations(np.random.default_rng(0), SIZING_POSES)
-    with_frames = carried_torques(robot, poses, BARE_LINK_MASS).max(axis=0) / HOLD_MARGIN
-    without = carried_torques(robot, poses).max(axis=0) / HOLD_MARGIN
+    as_loaded = carried_torques(robot, poses, BARE_LINK_MASS).max(axis=0) / HOLD_MARGIN
+    inertials_only = carried_torques(robot, poses).max(axis=0) / HOLD_MARGIN
     lift = robot.joints[0]
     assert lift.type == "prismatic" and not lift.effort_given
-    assert lift.effort == pytest.approx(with_frames[0]) and with_frames[0] > 1.25 * without[0]
+    np.testing.assert_array_equal(as_loaded, inertials_only)  # its bare links are all frames
+    assert lift.effort == pytest.approx(inertials_only[0]) and lift.effort == pytest.approx(247, rel=0.01)
+    assert bare_mass(robot, "L_ee") == 0.0  # a frame fixed to the hand
+    kr6 = _robot("kuka-kr6")  # rtb-data's KR6: no link has an <inertial>
+    assert bare_mass(kr6, "link_2") == BARE_LINK_MASS and bare_mass(kr6, "tool0") == 0.0
 
 
 def test_collision_meshes_that_miss_the_joints_are_named() -> None:
@@ -158,7 +164,7 @@ def test_armreach_robot_marks_the_efforts_it_sized() -> None:
             env.close()
         pages[name] = markdown(report)
     assert pages["kr16"].count(" (sized) |") == 6
-    assert "| 134.6 (sized) |" in pages["kr16"]  # A2: 107.7 N·m at most (its bare tool0 and flange too), over 80 %
+    assert "| 116.1 (sized) |" in pages["kr16"]  # A2: 92.9 N·m at most (its bare tool0 and flange: frames), over 80 %
     assert "effort limits the URDF does not give, sized" in pages["kr16"]
     assert "(sized)" not in pages["ar6"]
 

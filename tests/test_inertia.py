@@ -18,6 +18,7 @@ from lxml import etree
 
 from armreach_core.diagnostics.corpus import corpus_arm
 from armreach_core.diagnostics.parity import run_parity
+from armreach_core.plugins.builtin import AR6_HOME
 from armreach_core.robot.hulls import simulation_urdf
 from armreach_core.robot.inertia import DENSEST, ball_moment, repaired
 from armreach_core.robot.model import RobotModel
@@ -87,3 +88,38 @@ def test_an_arm_of_point_masses_moves_alike_on_both_engines():
     for sequence in ("random", "biased"):
         gap = report.gap(sequence, "mujoco")
         assert gap.free_joint_rms_rad is not None and gap.free_joint_rms_rad < 1e-3, (sequence, gap)  # was 0.086-0.43
+
+
+def _joint_path(backend: str, urdf: str, steps: int = 40) -> np.ndarray:
+    from armreach_core.env import ArmEnv
+
+    env = ArmEnv("reach", backend=backend, urdf=urdf, ee_link="tool0", home=AR6_HOME)
+    try:
+        env.reset(seed=0)
+        actions = np.random.default_rng(0).uniform(-1, 1, (steps, env.robot.dof)).astype(np.float32)
+        return np.array([env.step(a)[0][: env.robot.dof] for a in actions])
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_frame_without_inertial_weighs_nothing_and_a_moving_bare_link_what_pybullet_gives_it(
+    backend, tmp_path, ar6_urdf
+):
+    """A camera frame 30 cm off the forearm, without ``<inertial>``: PyBullet's reader gave it
+    1 kg and 1 kg·m² (a Kinova Gen3 lite's shoulder gave way under such a frame at its tool); as
+    a URDF says, it weighs nothing: the arm moves as it does without it. A bare link on a joint
+    of its own still gets PyBullet's 1 kg on both engines, so it changes the arm's motion."""
+    text = ar6_urdf.read_text()
+    frame = (
+        '<link name="camera_frame"/><joint name="camera_mount" type="fixed"><parent link="forearm_link"/>'
+        '<child link="camera_frame"/><origin xyz="0.3 0 0.1" rpy="0 0 0"/></joint></robot>'
+    )
+    spinning = frame.replace('type="fixed"', 'type="continuous"').replace("</joint>", '<axis xyz="0 0 1"/></joint>')
+    paths = {}
+    for name, extra in (("plain", "</robot>"), ("frame", frame), ("spinning", spinning)):
+        path = tmp_path / f"{name}.urdf"
+        path.write_text(text.replace("</robot>", extra))
+        paths[name] = _joint_path(backend, str(path))
+    np.testing.assert_allclose(paths["frame"], paths["plain"], atol=1e-9)
+    assert np.abs(paths["spinning"] - paths["plain"]).max() > 1e-3

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 from lxml import etree
 
-from armreach_core.robot.inertia import repair_inertials
+from armreach_core.robot.inertia import massless_frames, repair_inertials
 
 if TYPE_CHECKING:
     from armreach_core.robot.model import RobotModel
@@ -134,10 +134,12 @@ def write_obj(mesh: Any, out: Path) -> Path:
 def simulation_urdf(robot: RobotModel, *, visuals: bool) -> bytes:
     """The robot's resolved URDF with collision meshes replaced by their hulls and, unless
     ``visuals``, without ``<visual>`` elements (an env that never renders needs none), and
-    with inertias no rigid body has repaired (:mod:`armreach_core.robot.inertia`).
+    with inertias no rigid body has repaired and frames (links without ``<inertial>`` fixed to
+    another) massless (:mod:`armreach_core.robot.inertia`).
     :func:`armreach_core.robot.meshes.readable` then converts the meshes an engine cannot read."""
     root = etree.fromstring(robot.parsed.resolved_xml)
     repair_inertials(root)
+    massless_frames(root)
     for collision in root.iter("collision"):
         for mesh in collision.iter("mesh"):
             filename = mesh.get("filename", "")

@@ -23,6 +23,13 @@ engines load is repaired here:
 :func:`repairs` lists them (the checks log each one on ``armreach.robot`` when the URDF is
 read); :func:`repair_inertials` writes them into the URDF the engines load. The URDF the
 user gave, and the kinematics and statics read from it, are unchanged.
+
+A link without ``<inertial>`` fixed to another (a ``tool0``, a flange, a camera frame) is a
+frame: it weighs nothing, as the URDF format says, on both engines (:func:`massless_frames`
+writes that in; PyBullet's reader would load it as 1 kg with 1 kg·m² about every axis, which
+made a Kinova Gen3 lite's shoulder give way under a phantom 1 kg at its tool). A link without
+``<inertial>`` whose own joint moves still gets PyBullet's 1 kg on both engines
+(:data:`armreach_core.robot.statics.BARE_LINK_MASS`): an engine needs a body to move.
 """
 
 from __future__ import annotations
@@ -118,3 +125,22 @@ def repair_inertials(root: Any) -> int:
         for key, (i, j) in zip(INERTIA_KEYS, _PLACES, strict=True):
             inertia.set(key, repr(float(tensor[i, j])))
     return len(found)
+
+
+def massless_frames(root: Any) -> list[str]:
+    """Give every link of the URDF tree ``root`` that has no ``<inertial>`` and hangs from a fixed
+    joint a zero mass and inertia, in place; their names."""
+    fixed = {
+        str(child.get("link"))
+        for joint in root.iter("joint")
+        if joint.get("type") == "fixed" and (child := joint.find("child")) is not None
+    }
+    frames = []
+    for link in root.iter("link"):
+        if link.find("inertial") is None and link.get("name") in fixed:
+            inertial = link.makeelement("inertial", {})
+            inertial.append(inertial.makeelement("mass", {"value": "0"}))
+            inertial.append(inertial.makeelement("inertia", dict.fromkeys(INERTIA_KEYS, "0")))
+            link.insert(0, inertial)
+            frames.append(str(link.get("name")))
+    return frames

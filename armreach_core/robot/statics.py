@@ -27,9 +27,18 @@ GRAVITY = np.array([0.0, 0.0, -9.81])
 HOLD_MARGIN = 0.8
 #: Seeded poses over which a joint without an effort limit is sized (:func:`sized_efforts`).
 SIZING_POSES = 2048
-#: The mass (kg) both engines give a link without ``<inertial>``: PyBullet's URDF reader loads it
-#: as 1 kg and 1 kg·m² about every axis, and the MuJoCo backend copies that for parity.
+#: The mass (kg) both engines give a link without ``<inertial>`` whose own joint moves: PyBullet's
+#: URDF reader loads it as 1 kg and 1 kg·m² about every axis, and the MuJoCo backend copies that
+#: for parity. One fixed to another is a frame and weighs nothing
+#: (:func:`armreach_core.robot.inertia.massless_frames`).
 BARE_LINK_MASS = 1.0
+
+
+def bare_mass(robot: ArmKinematics, link: str, bare_link_mass: float = BARE_LINK_MASS) -> float:
+    """What a link without ``<inertial>`` weighs on the engines: ``bare_link_mass`` if its own
+    joint moves, nothing if it is a frame fixed to another link (or the root)."""
+    joint = next((j for j in robot.tree_joints if j.child == link), None)
+    return bare_link_mass if joint is not None and joint.kind != "fixed" else 0.0
 
 
 @dataclass(frozen=True)
@@ -44,8 +53,9 @@ class MassModel:
 def mass_model(robot: ArmKinematics, bare_link_mass: float = 0.0) -> MassModel:
     """The (cached) lumped masses of ``robot``'s arm (off-chain joints where the robot holds them).
 
-    A link without ``<inertial>`` weighs ``bare_link_mass`` at its origin: nothing, as the URDF
-    says, or :data:`BARE_LINK_MASS`, as the engines load it."""
+    A link without ``<inertial>`` whose joint moves weighs ``bare_link_mass`` at its origin:
+    nothing, as the URDF says, or :data:`BARE_LINK_MASS`, as the engines load it; a frame
+    fixed to another link weighs nothing (:func:`bare_mass`)."""
     n = robot.arm_dof
     reference = robot.clip(np.zeros(robot.dof))
     links = robot.link_transforms(reference)
@@ -54,7 +64,13 @@ def mass_model(robot: ArmKinematics, bare_link_mass: float = 0.0) -> MassModel:
     moments = np.zeros((n, 3))
     for link in robot.link_names:
         inertial = robot.parsed.model.link_map[link].inertial
-        mass = bare_link_mass if inertial is None else 0.0 if inertial.mass is None else float(inertial.mass)
+        mass = (
+            bare_mass(robot, link, bare_link_mass)
+            if inertial is None
+            else 0.0
+            if inertial.mass is None
+            else float(inertial.mass)
+        )
         index = robot.chain_index_of(link)
         if index is None or not (np.isfinite(mass) and mass > 0):
             continue
@@ -112,9 +128,8 @@ def sized_efforts(robot: ArmKinematics) -> tuple[JointSpec, ...]:
     :data:`~armreach_core.robot.joints.DEFAULT_EFFORT_LIMIT`. A single default cannot fit every arm:
     100 N·m would hold a KUKA KR210's shoulder in none of its poses. A vertical base joint is
     sized as if its axis were horizontal: the motor that moves the same load. Tool joints keep
-    the default. The load is what the engines simulate: a link without ``<inertial>`` weighs
-    :data:`BARE_LINK_MASS` (Vega's lift carries six bare frames, 6 kg more than its inertials say,
-    and a motor sized without them left it on its lower limit).
+    the default. The load is what the engines simulate: a link without ``<inertial>`` whose
+    joint moves weighs :data:`BARE_LINK_MASS`, a frame fixed to another nothing (:func:`bare_mass`).
     """
     if all(joint.effort_given for joint in robot.joints[: robot.arm_dof]):
         return robot.joints
@@ -176,7 +191,8 @@ def joint_inertias(robot: ArmKinematics, q: npt.ArrayLike, names: Sequence[str])
             stack += below.get(link, [])
             inertial = robot.parsed.model.link_map[link].inertial
             if inertial is None:
-                mass, tensor, origin = BARE_LINK_MASS, np.eye(3) * BARE_LINK_MASS, np.eye(4)
+                mass = bare_mass(robot, link)
+                tensor, origin = np.eye(3) * mass, np.eye(4)
             else:
                 mass = 0.0 if inertial.mass is None else float(inertial.mass)
                 tensor = np.zeros((3, 3)) if inertial.inertia is None else np.asarray(inertial.inertia, float)

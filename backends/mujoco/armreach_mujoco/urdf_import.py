@@ -49,30 +49,20 @@ def urdf_for_mujoco(robot: RobotModel, visuals: bool = True) -> str:
 
 
 def links_without_inertial(robot: RobotModel) -> list[str]:
-    """Links with no ``<inertial>`` that move (a movable joint lies between them and the root)."""
+    """Links with no ``<inertial>`` whose own joint moves (frames fixed to another link are
+    massless: :func:`armreach_core.robot.inertia.massless_frames`)."""
     urdf = robot.parsed.model.robot
-    parent_joint = {str(j.child): j for j in urdf.joints}
-    moving: list[str] = []
-    for link in urdf.links:
-        if link.inertial is not None:
-            continue
-        name = str(link.name)
-        while name in parent_joint:
-            joint = parent_joint[name]
-            if str(joint.type) != "fixed":
-                moving.append(str(link.name))
-                break
-            name = str(joint.parent)
-    return moving
+    moving = {str(j.child) for j in urdf.joints if str(j.type) != "fixed"}
+    return [str(link.name) for link in urdf.links if link.inertial is None and str(link.name) in moving]
 
 
 def spec_from_urdf(robot: RobotModel, visuals: bool = True) -> Any:
     """An ``MjSpec`` of the robot alone, as MuJoCo imports it, with PyBullet's missing inertials.
 
-    PyBullet's URDF reader gives a moving link without ``<inertial>`` (a bare ``tool0``)
-    1 kg and 1 kg m² on each axis (with a warning), which adds ~1 kg m² to the inertia
-    of every joint before it; MuJoCo would make it massless, and light wrists would then
-    move ~50x faster than in PyBullet. Links welded to the root keep MuJoCo's reading.
+    PyBullet's URDF reader gives a link without ``<inertial>`` whose joint moves 1 kg and
+    1 kg m² on each axis (with a warning); MuJoCo would make it massless, and it is copied
+    here for parity. A frame fixed to another link comes massless from the URDF both engines
+    load (:func:`armreach_core.robot.inertia.massless_frames`).
     """
     try:
         spec = mujoco.MjSpec.from_string(urdf_for_mujoco(robot, visuals))

@@ -130,7 +130,7 @@ def test_a_merged_links_mass_is_its_own_and_changing_it_changes_its_body(tooled:
         body_mass = pb.getDynamicsInfo(world.body, wrist, physicsClientId=world.client)[0]
         assert world.link_mass("tool_body") == pytest.approx(2.0)
         assert world.link_mass("wrist_3_link") == pytest.approx(0.1879)
-        assert body_mass == pytest.approx(0.1879 + 0.001 + 2.0 + 1.0)  # tool0's 1 g; the bare centre: PyBullet's 1 kg
+        assert body_mass == pytest.approx(0.1879 + 0.001 + 2.0)  # tool0's 1 g; the bare centre is a frame: nothing
         world.set_link_mass("tool_body", 3.0)
         assert world.link_mass("tool_body") == pytest.approx(3.0)
         assert world.link_mass("wrist_3_link") == pytest.approx(0.1879)
