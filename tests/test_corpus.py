@@ -56,6 +56,7 @@ EXPECTED = {
     "widowx-250s": ("/ee_gripper_link", ("gripper", "left_finger", "right_finger")),
     "lynxmotion-al5d": ("link4", ()),
     "puma560": ("link7", ()),
+    "ur5e": ("tool0", ()),
 }
 #: Actuated joints: the arm's own, as its maker builds it; TALOS's description starts after its shoulder joint.
 DOF = {
@@ -82,6 +83,7 @@ DOF = {
     "widowx-250s": 6,
     "lynxmotion-al5d": 4,
     "puma560": 6,
+    "ur5e": 6,
 }
 #: Arms whose held joints are read from the engines: a jaw, mimic fingers, a gripper below a fixed stator.
 HELD = ("so100", "franka-panda", "z1")

@@ -342,6 +342,10 @@ MEASURED: dict[tuple[str, str], Measured] = {
     ("puma560", "biased"): Measured(0.0328, 0.03, None, 0.00169, (None, None)),
     ("puma560", "scripted"): Measured(0.000249, 0.00572, None, 0.0146, (None, None)),
     ("puma560", "press"): Measured(0.00057, 0.0027, 1.29, None, (105, 105)),
+    ("ur5e", "random"): Measured(0.00896, 0.00604, 10.9, 0.357, (8, 0)),
+    ("ur5e", "biased"): Measured(0.0, 0.0, 34.6, 1.8, (0, 0)),
+    ("ur5e", "scripted"): Measured(0.00173, 0.0144, None, 0.0386, (None, None)),
+    ("ur5e", "press"): Measured(0.0015, 0.000763, 1.34, None, (1, 1)),
 }
 #: Arms the default run covers (the rest of the corpus runs with -m slow).
 FAST_ARMS = ("ar6", "xarm6")

@@ -3,7 +3,8 @@
 One list, one line per arm. The descriptions come from package registries, with their
 meshes, as published: ``example-robot-data`` (PyPI), ``pybullet_data`` (installed with
 PyBullet), ``rtb-data`` (PyPI, the Robotics Toolbox's data: ROS-Industrial KUKA and ABB
-xacro descriptions, STL/DAE meshes) and ``dexmate-urdf`` (PyPI: glTF/GLB visual meshes).
+xacro descriptions, STL/DAE meshes), ``dexmate-urdf`` (PyPI: glTF/GLB visual meshes) and
+``airo-models`` (PyPI: a UR5e written for Drake).
 ``make install`` installs them all. Nothing here is tuned to an arm: each line says where
 the description is, its format, and what a user must say about it: where the ROS packages
 it names live (``package_dirs``), which end is the arm's when a robot has several, and a
@@ -30,6 +31,7 @@ SOURCES = {
     "pybullet_data": ("", "pip install pybullet"),
     "rtb-data": ("rtbdata/xacro", "pip install rtb-data"),
     "dexmate-urdf": ("dexmate_urdf/robots", "pip install dexmate-urdf"),
+    "airo-models": ("airo_models/arms", "pip install airo-models"),
 }
 
 
@@ -167,6 +169,9 @@ CORPUS: tuple[CorpusArm, ...] = (
         ee_link="L_ee",
         home=(0.0,) * 9,
     ),
+    # a UR5e as Drake users have it: drake:acceleration on every <limit>, the prefix never declared;
+    # sphere and OBJ collision geometry; tool0 and flange bare frames
+    CorpusArm("ur5e", "airo-models", "ur5e/ur5e.urdf", "URDF with Drake extensions, OBJ meshes"),
 )
 
 
