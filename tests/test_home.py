@@ -98,6 +98,22 @@ def test_a_given_base_below_the_ground_is_told_how_far_to_raise_it(tmp_path, ar6
         RobotModel(_sunk(tmp_path, ar6_urdf), base_position=(0, 0, 0))
 
 
+def test_no_home_clear_of_self_collision_names_the_links_in_the_way(tmp_path, ar6_urdf):
+    """A base whose collision dome (a 0.6 m sphere) holds the whole arm near its zero pose, as a
+    telescoping arm's nested segments or a mobile base around a folded arm do: the error says
+    what blocks every pose and how to go on."""
+    text = ar6_urdf.read_text()
+    at = text.index(">", text.index('<link name="base_link"')) + 1
+    dome = '<collision><origin xyz="0 0 0.2"/><geometry><sphere radius="0.6"/></geometry></collision>'
+    path = tmp_path / "domed.urdf"
+    path.write_text(text[:at] + dome + text[at:])
+    with pytest.raises(URDFError) as info:
+        RobotModel(str(path), ee_link="tool0")
+    message = str(info.value)
+    assert "poses clear of the ground and away from singularities have links overlapping" in message
+    assert "most often 'base_link' and 'forearm_link'" in message and "--home" in message
+
+
 #: Arms whose configurations' own end-effector points (seed 0) include one the search reaches only to
 #: within a few mm (measured, then 2.5 times).
 RIM_M = {"lynxmotion-al5d": 0.0034}

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -111,9 +112,16 @@ def default_home(robot: ArmKinematics) -> FloatArray:
             f"(--base-position 0 0 {lift:.2f}), or pass a home: home=[...] (--home ...)",
             lift,
         )
+    blocked = [pair for i in np.flatnonzero(fine) for pair in self_collisions(robot, batch[i])]
+    why = (
+        f": all {int(fine.sum())} poses clear of the ground and away from singularities have links overlapping, "
+        f"most often {' and '.join(map(repr, Counter(blocked).most_common(1)[0][0]))} (by their collision boxes)"
+        if blocked
+        else f": none of the {len(batch)} poses tried is away from singularities"
+    )
     raise URDFError(
         f"no home of {robot.name!r} near its zero pose is clear of the ground and of self-collision and away "
-        "from singularities; pass one: home=[...] (--home ...)"
+        f"from singularities{why}; pass one: home=[...] (--home ...)"
     )
 
 
