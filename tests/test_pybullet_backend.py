@@ -64,6 +64,24 @@ def test_create_step_close_cycles_leak_no_clients_or_memory():
     assert cycles.clients_leaked == 0 and cycles.fds_growth == 0
 
 
+def test_envs_dropped_unclosed_before_a_soak_are_not_counted_in_it():
+    """Envs a caller dropped without closing, in reference cycles, hold their clients until Python's
+    collector runs: the soak collects them before it counts (it read 3 clients before and 0 after)."""
+    import gc
+
+    gc.disable()  # the collector runs only when called, as it may not have run before a soak
+    try:
+        for _ in range(3):
+            env = ArmReach6DOFEnv(backend="pybullet")
+            env.reset(seed=0)
+            env.cycle = env  # type: ignore[attr-defined]  # freed only by the collector
+        del env
+        report = soak_backend("pybullet", steps=0, cycles=3, seed=0, bounds=Bounds(cycles_rss_mb=1000.0))
+    finally:
+        gc.enable()
+    assert report.cycles is not None and (report.cycles.clients_before, report.cycles.clients_leaked) == (0, 0)
+
+
 TETRAHEDRON_PLY = """ply
 format ascii 1.0
 element vertex 4

@@ -198,6 +198,7 @@ def _cycles(backend: str, cycles: int, seed: int, progress: Callable[[str], None
         # runs: without this, RSS climbed 2.7 MB over the first 90 cycles and stayed there
         gc.collect()
 
+    settle()  # envs dropped unclosed before this call hold clients until collected: not this soak's
     clients_before = live_clients() if live_clients is not None else None
     # at least three: freeing the first env can move where the allocator puts the next ones (glibc
     # raises its mmap threshold), a one-time step of about one env (29 MB on PyBullet) seen after one
