@@ -356,16 +356,16 @@ class Tree:
                 ranked = past
         if ranked:
             best = [name for rank, _, name in ranked if rank == ranked[0][0]]
+            place = usable[best[0]][:3, 3]
+            apart = any(np.linalg.norm(usable[name][:3, 3] - place) > SAME_PLACE for name in best)
             nested = sorted(best, key=self.order.index)  # breadth first: parents first
-            apart = any(np.linalg.norm(usable[name][:3, 3] - usable[best[0]][:3, 3]) > SAME_PLACE for name in best)
             if apart and all(self._descends(b, a) for a, b in itertools.pairwise(nested)):
                 notes.append(
                     f"tool centre {nested[-1]!r} hangs from {', '.join(map(repr, nested[:-1]))} through fixed joints, "
                     "so it wins: the end of that chain of tool frames"
                 )
-                best = [nested[-1]]
-            place = usable[best[0]][:3, 3]
-            if any(np.linalg.norm(usable[name][:3, 3] - place) > SAME_PLACE for name in best):
+                best, place, apart = [nested[-1]], usable[nested[-1]][:3, 3], False
+            if apart:
                 spelled = "; ".join(f'ee_link="{c}" (Python) or --ee-link {c} (command line)' for c in best)
                 raise URDFError(
                     f"{self.name!r} names {len(best)} tool centres at different places at {at} "

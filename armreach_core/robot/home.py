@@ -93,10 +93,13 @@ def default_home(robot: ArmKinematics) -> FloatArray:
     # Candidates come in rings: the zero pose, then DIRECTIONS per radius. The first ring with
     # a qualifying pose wins; within it the most dexterous pose without self-collision.
     rings = [range(0, 1)] + [range(1 + i * DIRECTIONS, 1 + (i + 1) * DIRECTIONS) for i in range(len(RADII))]
+    blocked: list[tuple[str, str]] = []  # the overlapping pairs of every qualifying pose, for the error
     for ring in rings:
         ok = [i for i in ring if fine[i]]
         for i in sorted(ok, key=lambda k: -dexterity[k]):
-            if not self_collisions(robot, batch[i]):
+            hits = self_collisions(robot, batch[i])
+            blocked += hits
+            if not hits:
                 reason = "the URDF's zero pose" if i == 0 else "the nearest pose to the zero pose that qualifies"
                 log.info(
                     "home of %r: %s (lowest link %.3f m above the ground, dexterity %.3g of %.3g)",
@@ -112,7 +115,6 @@ def default_home(robot: ArmKinematics) -> FloatArray:
             f"(--base-position 0 0 {lift:.2f}), or pass a home: home=[...] (--home ...)",
             lift,
         )
-    blocked = [pair for i in np.flatnonzero(fine) for pair in self_collisions(robot, batch[i])]
     why = (
         f": all {int(fine.sum())} poses clear of the ground and away from singularities have links overlapping, "
         f"most often {' and '.join(map(repr, Counter(blocked).most_common(1)[0][0]))} (by their collision boxes)"

@@ -24,6 +24,7 @@ import io
 import logging
 import os
 import re
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -221,17 +222,16 @@ def _parse(data: bytes, urdf_path: Path) -> etree._Element:
         root = etree.fromstring(data[: tag.end()] + declared + data[tag.end() :], parser=_safe_parser())
     except etree.XMLSyntaxError:
         raise error from None
-    dropped: dict[str, int] = {}
+    dropped: Counter[str] = Counter()
     ours = "{" + UNDECLARED_NAMESPACE
-    for element in root.iter():
+    for element in list(root.iter()):
         for key in [str(k) for k in element.attrib if str(k).startswith(ours)]:
-            dropped[_prefixed(key)] = dropped.get(_prefixed(key), 0) + 1
+            dropped[_prefixed(key)] += 1
             del element.attrib[key]
-    outer = [e for e in root.iter() if isinstance(e.tag, str) and e.tag.startswith(ours) and e is not root]
-    for element in outer:
         parent = element.getparent()
-        if parent is not None and not (isinstance(parent.tag, str) and parent.tag.startswith(ours)):
-            dropped[f"<{_prefixed(element.tag)}>"] = dropped.get(f"<{_prefixed(element.tag)}>", 0) + 1
+        # the outermost foreign element goes, with what it holds (already removed from the tree)
+        if str(element.tag).startswith(ours) and parent is not None and not str(parent.tag).startswith(ours):
+            dropped[f"<{_prefixed(str(element.tag))}>"] += 1
             parent.remove(element)
     etree.cleanup_namespaces(root)
     log.warning(

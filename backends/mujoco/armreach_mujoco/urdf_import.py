@@ -19,7 +19,7 @@ from armreach_core.errors import URDFError
 from armreach_core.robot.hulls import simulation_urdf
 from armreach_core.robot.meshes import readable
 from armreach_core.robot.model import RobotModel
-from armreach_core.robot.statics import BARE_LINK_MASS
+from armreach_core.robot.statics import BARE_LINK_MASS, bare_mass
 from armreach_mujoco.engine import mujoco
 
 #: Mesh formats MuJoCo reads itself; others are converted to .obj with trimesh.
@@ -51,9 +51,8 @@ def urdf_for_mujoco(robot: RobotModel, visuals: bool = True) -> str:
 def links_without_inertial(robot: RobotModel) -> list[str]:
     """Links with no ``<inertial>`` whose own joint moves (frames fixed to another link are
     massless: :func:`armreach_core.robot.inertia.massless_frames`)."""
-    urdf = robot.parsed.model.robot
-    moving = {str(j.child) for j in urdf.joints if str(j.type) != "fixed"}
-    return [str(link.name) for link in urdf.links if link.inertial is None and str(link.name) in moving]
+    links = robot.parsed.model.link_map
+    return [link for link in robot.link_names if links[link].inertial is None and bare_mass(robot, link) > 0]
 
 
 def spec_from_urdf(robot: RobotModel, visuals: bool = True) -> Any:
