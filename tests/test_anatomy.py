@@ -143,3 +143,17 @@ def test_of_nested_tool_centres_the_one_at_the_end_of_the_chain_of_frames_wins(t
     assert "'iiwa_link_ee_x', 'iiwa_link_ee'" in str(info.value) or "'iiwa_link_ee', 'iiwa_link_ee_x'" in str(
         info.value
     )
+
+
+def test_a_word_every_joint_of_the_arm_says_names_the_arm_not_a_gripper(tmp_path, caplog):
+    # a TriFinger robot's finger: every joint and link is named finger_..., so the word tells nothing
+    robot = _build(Description("finger-edu").write(tmp_path), caplog)
+    joints = ("finger_base_to_upper_joint", "finger_upper_to_middle_joint", "finger_middle_to_lower_joint")
+    assert robot.joint_names == joints and not robot.held_joints
+    assert (robot.ee_link, robot.gripper_joints) == ("finger_tip_link", ())
+    assert f"{joints[2]!r} is an arm joint: its name says gripper, as every joint above it does" in caplog.text
+    # the joints above named otherwise, the last one's name is a hint again: a finger at the end of an arm
+    finger = Description("finger-edu").rename_joint(joints[0], "shoulder").rename_joint(joints[1], "elbow")
+    finger.rename_link("finger_upper_link", "upper_link").rename_link("finger_middle_link", "middle_link")
+    robot = _build(finger.write(tmp_path, "finger_at_the_end.urdf"), caplog)
+    assert robot.joint_names == ("shoulder", "elbow") and robot.gripper_joints == (joints[2],)

@@ -29,7 +29,7 @@ from tests.conftest import BACKENDS
 #: mesh cache; the others take under 2 s each, about 13 s together).
 SLOW = {
     "kinova-jaco", "z1", "so101", "panda", "ur10", "kuka-kr16", "kuka-kr210", "abb-irb140", "vega-1u-left", "kuka-kr6",
-    "widowx-250s", "puma560",
+    "widowx-250s", "puma560", "stretch-re2",
 }  # fmt: skip
 #: What the rules of armreach_core.robot.anatomy give: (end effector, gripper joints).
 EXPECTED = {
@@ -57,6 +57,8 @@ EXPECTED = {
     "lynxmotion-al5d": ("link4", ()),
     "puma560": ("link7", ()),
     "ur5e": ("tool0", ()),
+    "stretch-re2": ("link_grasp_center", ()),
+    "finger-edu": ("finger_tip_link", ()),
 }
 #: Actuated joints: the arm's own, as its maker builds it; TALOS's description starts after its shoulder joint.
 DOF = {
@@ -84,6 +86,8 @@ DOF = {
     "lynxmotion-al5d": 4,
     "puma560": 6,
     "ur5e": 6,
+    "stretch-re2": 6,
+    "finger-edu": 3,
 }
 #: Arms whose held joints are read from the engines: a jaw, mimic fingers, a gripper below a fixed stator.
 HELD = ("so100", "franka-panda", "z1")
@@ -137,6 +141,11 @@ def test_end_effector_is_never_a_finger(arm: CorpusArm) -> None:
     robot = build_robot(_spec(arm))
     assert (robot.ee_link, robot.gripper_joints) == EXPECTED[arm.name]
     urdf = {str(j.name): j for j in robot.parsed.model.robot.joints}
+    if all(_says_gripper(urdf[name]) for name in robot.joint_names):
+        # a robot finger (TriFinger's): every joint and link says finger, so the word names the arm,
+        # which keeps every movable joint and ends at its tip
+        assert not robot.held_joints and not [j for j in urdf.values() if str(j.parent) == robot.ee_link]
+        return
     by_child = {str(j.child): j for j in urdf.values()}
     above, link = [], robot.ee_link
     while link in by_child:

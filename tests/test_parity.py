@@ -346,6 +346,14 @@ MEASURED: dict[tuple[str, str], Measured] = {
     ("ur5e", "biased"): Measured(0.0, 0.0, 34.6, 1.8, (0, 0)),
     ("ur5e", "scripted"): Measured(0.00173, 0.0144, None, 0.0386, (None, None)),
     ("ur5e", "press"): Measured(0.0015, 0.000763, 1.34, None, (1, 1)),
+    ("stretch-re2", "random"): Measured(0.417, 0.197, None, 0.0258, (None, None)),
+    ("stretch-re2", "biased"): Measured(0.0204, 0.0225, None, 0.00586, (None, None)),
+    ("stretch-re2", "scripted"): Measured(0.000526, 0.00327, None, 0.257, (None, None)),
+    ("stretch-re2", "press"): Measured(0.000113, 0.000108, None, None, (None, None)),
+    ("finger-edu", "random"): Measured(0.0047, 0.0133, 6.4, 0.215, (31, 25)),
+    ("finger-edu", "biased"): Measured(0.00164, 0.00433, 31.3, 0.509, (8, 4)),
+    ("finger-edu", "scripted"): Measured(0.00163, 0.00438, None, 0.0298, (None, None)),
+    ("finger-edu", "press"): Measured(0.000706, 0.00448, 4.88, None, (11, 11)),
 }
 #: Arms the default run covers (the rest of the corpus runs with -m slow).
 FAST_ARMS = ("ar6", "xarm6")

@@ -32,6 +32,7 @@ SOURCES = {
     "rtb-data": ("rtbdata/xacro", "pip install rtb-data"),
     "dexmate-urdf": ("dexmate_urdf/robots", "pip install dexmate-urdf"),
     "airo-models": ("airo_models/arms", "pip install airo-models"),
+    "hello-robot-stretch-urdf": ("stretch_urdf", "pip install hello-robot-stretch-urdf"),
 }
 
 
@@ -172,6 +173,17 @@ CORPUS: tuple[CorpusArm, ...] = (
     # a UR5e as Drake users have it: drake:acceleration on every <limit>, the prefix never declared;
     # sphere and OBJ collision geometry; tool0 and flange bare frames
     CorpusArm("ur5e", "airo-models", "ur5e/ur5e.urdf", "URDF with Drake extensions, OBJ meshes"),
+    # a mobile manipulator: a lift, then a telescoping arm of four nested stages on parallel prismatic
+    # joints, and a wrist; wheels, head and mast beside it, so its grasp centre is named
+    CorpusArm(
+        "stretch-re2",
+        "hello-robot-stretch-urdf",
+        "RE2V0/stretch_description_RE2V0_tool_stretch_gripper.urdf",
+        "URDF, STL meshes, prismatic joints",
+        ee_link="link_grasp_center",
+    ),
+    # a TriFinger robot's finger: a 3-joint arm whose every joint and link is named finger_...
+    CorpusArm("finger-edu", "example-robot-data", "finger_edu_description/robots/finger_edu.urdf"),
 )
 
 

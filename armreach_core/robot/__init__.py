@@ -1,7 +1,8 @@
 """Reading and understanding an arm's description: everything known from the URDF alone.
 
 - :mod:`.urdf`, :mod:`.checks`: reading a URDF safely (yourdfpy), with clear errors.
-- :mod:`.anatomy`: which link is the end effector, which joints belong to a gripper.
+- :mod:`.anatomy`, :mod:`.names`: which link is the end effector, which joints belong to a
+  gripper; what names say, as hints.
 - :mod:`.kinematics`: the kinematic tree and its one forward-kinematics implementation.
 - :mod:`.model`: :class:`RobotModel`, the arm as one immutable value.
 - :mod:`.spec`, :mod:`.factory`: :class:`ArmSpec`, the frozen description of an arm, and

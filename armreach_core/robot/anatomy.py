@@ -12,9 +12,10 @@ Otherwise it is a **gripper joint**, and the chain ends above it, when
 
 * it is a ``<mimic>`` joint, or other joints mimic it (a finger linkage); or
 * (a hint, used only where the structure leaves the choice open) its name says gripper
-  (:data:`GRIPPER_WORDS`: finger, gripper, jaw...) or its child link is a moving gripper part
-  (:data:`PART_WORDS`; a link called ``gripper`` is the gripper's body, which the wrist turns,
-  not a part).
+  (:mod:`armreach_core.robot.names`: finger, gripper, jaw...) or its child link is a moving
+  gripper part (a link called ``gripper`` is the gripper's body, which the wrist turns, not a
+  part), unless every movable joint above it says so too: the word then names the whole arm
+  (a TriFinger finger, whose joints are all ``finger_...``), not a gripper at its end.
 
 Where the tree branches into two or more subtrees with movable joints, a subtree is a
 finger when it carries no tool centre and either mimics or is mimicked by a sibling, or is a
@@ -29,7 +30,7 @@ to the gripper. Every movable joint below the mount is a gripper joint. Branches
 none of these (two arms on one torso) make the end effector ambiguous: a
 :class:`~armreach_core.errors.URDFError` lists the candidates.
 
-The default end effector is a tool centre named in the URDF (:data:`TOOL_CENTRE_NAMES`, in
+The default end effector is a tool centre named in the URDF (:data:`~armreach_core.robot.names.TOOL_CENTRE_NAMES`, in
 that priority) rigidly attached to the mount, else the mount itself; without a gripper, the
 tool centre or the tip of the chain. When tool centres compete, one past the gripper mount
 (below it in the tree, between the fingers: a WidowX's ``ee_gripper_link`` beats its
@@ -44,7 +45,6 @@ Every decision is kept with its reason (:attr:`EndEffector.decisions`) and logge
 from __future__ import annotations
 
 import itertools
-import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -53,54 +53,12 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.errors import URDFError
+from armreach_core.robot.names import TOOL_CENTRE_NAMES, is_gripper_part, says_gripper, tool_centre_rank
 
 #: Joint types that armreach actuates.
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
-#: Words in a joint's name that make it a gripper joint.
-GRIPPER_WORDS = ("finger", "gripper", "jaw", "claw", "knuckle")
-#: Words in a link's name that make it a moving gripper part (never a default end effector).
-PART_WORDS = ("finger", "jaw", "claw", "knuckle")
-#: Names of a tool centre, highest priority first, as patterns over the name's lower-case
-#: words joined by ``_`` (``panda_hand_tcp``, ``link_eef``, ``tool0``, ``ee_link``...).
-TOOL_CENTRE_NAMES = (
-    ("tcp", "tcp"),
-    ("tool centre", "tool_?cent(?:er|re)(?:_?point)?"),
-    ("grasp target", "grasp_?(?:target|point)"),
-    ("tool0", "tool_?0"),
-    ("ee_link", "ee(?:_?link)?"),
-    ("end effector", "end_?effector"),
-    ("eef", "eef"),
-)
 #: Tips closer than this (m) are at the same position.
 SAME_PLACE = 1e-9
-
-_PATTERNS = [re.compile(f"(?:^|_){pattern}(?:_|$)") for _, pattern in TOOL_CENTRE_NAMES]
-
-
-def words(name: str) -> str:
-    """``name`` as lower-case words joined by ``_`` (camelCase split): ``gripperStator`` -> ``gripper_stator``."""
-    spaced = re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", name).lower()
-    return "_".join(part for part in re.split(r"[^a-z0-9]+", spaced) if part)
-
-
-def is_gripper_part(link: str) -> bool:
-    """Whether a link's name says it is a moving gripper part (a finger, a jaw...)."""
-    lowered = link.lower()
-    return any(word in lowered for word in PART_WORDS)
-
-
-def tool_centre_rank(link: str) -> int | None:
-    """Priority of ``link`` as a tool centre (0 highest), ``None`` if its name is not one."""
-    name = words(link)
-    return next((rank for rank, pattern in enumerate(_PATTERNS) if pattern.search(name)), None)
-
-
-def says_gripper(joint: Any) -> bool:
-    """Whether a movable joint is a gripper joint by its name, its child's name or a ``<mimic>``."""
-    lowered = str(joint.name).lower()
-    return (
-        joint.mimic is not None or any(word in lowered for word in GRIPPER_WORDS) or is_gripper_part(str(joint.child))
-    )
 
 
 @dataclass(frozen=True)
@@ -208,6 +166,9 @@ class Tree:
         """Whether a movable joint on the chain moves a jaw (ends the chain), and why (``None``: nothing to say)."""
         name = str(joint.name)
         hint = says_gripper(joint)
+        if hint and joint.mimic is None and self._named_like_the_arm(joint):
+            self.decisions.append(f"{name!r} is an arm joint: its name says gripper, as every joint above it does")
+            hint = False
         if joint.mimic is not None:
             return True, f"{name!r} is a gripper joint: it mimics {str(joint.mimic.joint)!r}"
         own = [j for j in self.movable_below(str(joint.child)) if self.joints[j].mimic is None]
@@ -232,6 +193,14 @@ class Tree:
                 f"{name!r} is a gripper joint: the last joint of the chain, and its name or its child's says so",
             )
         return False, None
+
+    def _named_like_the_arm(self, joint: Any) -> bool:
+        """Whether ``joint`` has movable joints above it and every one of them says gripper too."""
+        above, link = [], str(joint.parent)
+        while link in self.parent_joint:
+            above += [self.parent_joint[link]] if self._moves(self.parent_joint[link]) else []
+            link = str(self.parent_joint[link].parent)
+        return bool(above) and all(says_gripper(j) for j in above)
 
     def rigid_group(self, link: str) -> dict[str, npt.NDArray[np.float64]]:
         """Links rigidly attached to ``link`` (through fixed joints), with their transforms from the group's top."""
@@ -338,7 +307,8 @@ class Tree:
         group = self.rigid_group(mount)
         if not gripper:  # the chain's tip: only links from the last moving link down
             group = {name: t for name, t in group.items() if self._descends(name, mount)}
-        usable = {name: t for name, t in group.items() if not is_gripper_part(name)}
+        arm_word = not gripper and is_gripper_part(mount)  # the chain's own last link says finger: the arm's word
+        usable = {name: t for name, t in group.items() if arm_word or not is_gripper_part(name)}
         at = f"the link the gripper ({', '.join(gripper)}) hangs from" if gripper else "the tip of the arm's chain"
         ranked = sorted(
             (rank, self.order.index(name), name) for name in usable if (rank := tool_centre_rank(name)) is not None

@@ -106,8 +106,43 @@ def _geometry(robot: ArmKinematics) -> _Geometry:
         for other in near:
             neighbours.add((body, other))
             neighbours.add((other, body))
+    neighbours |= _telescopes(robot, group)
     pairs = {(x, y) for x in links for y in links if group[x] == group[y] or (group[x], group[y]) in neighbours}
     return _Geometry(points, grounded, frozenset(pairs))
+
+
+def _telescopes(robot: ArmKinematics, group: dict[str, str]) -> set[tuple[str, str]]:
+    """Pairs of bodies joined only by prismatic joints sliding along one direction: the stages of a
+    telescope, nested inside each other by design (Hello Robot's Stretch arm), so they may overlap."""
+    frames = robot.link_transforms(np.clip(np.zeros(robot.dof), robot.lower, robot.upper))
+    runs: list[tuple[FloatArray, dict[str, str]]] = []  # per direction: each body's link towards its telescope's root
+
+    def root(run: dict[str, str], body: str) -> str:
+        while run.get(body, body) != body:
+            body = run[body]
+        return body
+
+    for joint in robot.tree_joints:
+        if joint.kind != "prismatic":
+            continue
+        axis = frames[joint.parent][:3, :3] @ joint.origin[:3, :3] @ np.asarray(joint.axis, dtype=np.float64)
+        axis /= np.linalg.norm(axis)
+        run = next((r for direction, r in runs if abs(float(direction @ axis)) > 1.0 - 1e-6), None)
+        if run is None:
+            run = {}
+            runs.append((axis, run))
+        top, below = root(run, group[joint.parent]), root(run, group[joint.child])
+        run[top] = top
+        run[below] = top
+    pairs = set()
+    for _, run in runs:
+        telescopes: dict[str, set[str]] = {}
+        for body in run:
+            telescopes.setdefault(root(run, body), set()).add(body)
+        for stages in telescopes.values():
+            if len(stages) > 2:  # the two bodies of one joint are neighbours already
+                pairs |= {(x, y) for x in stages for y in stages if x != y}
+    return pairs
 
 
 def misplaced_geometry(robot: ArmKinematics) -> tuple[dict[str, float], float]:
