@@ -157,3 +157,16 @@ def test_a_word_every_joint_of_the_arm_says_names_the_arm_not_a_gripper(tmp_path
     finger.rename_link("finger_upper_link", "upper_link").rename_link("finger_middle_link", "middle_link")
     robot = _build(finger.write(tmp_path, "finger_at_the_end.urdf"), caplog)
     assert robot.joint_names == ("shoulder", "elbow") and robot.gripper_joints == (joints[2],)
+
+
+def test_with_the_end_effector_given_the_gripper_is_found_below_the_arm_when_the_base_branches(tmp_path, caplog):
+    # a Panda on a mobile base, as Hello Robot's Stretch is built: two wheels beside the arm make its
+    # end effector ambiguous, so the user names it; the gripper is still found, below the arm's chain
+    panda = Description("panda").add("continuous", "left_wheel_joint", "panda_link0", "left_wheel", "0 0.3 0")
+    panda.add("continuous", "right_wheel_joint", "panda_link0", "right_wheel", "0 -0.3 0")
+    with pytest.raises(URDFError, match="ambiguous"):
+        RobotModel(panda.write(tmp_path), allow_external_meshes=True)
+    robot = RobotModel(panda.write(tmp_path), ee_link="panda_hand_tcp", allow_external_meshes=True)
+    assert robot.joint_names == tuple(f"panda_joint{i}" for i in range(1, 8))
+    assert robot.gripper_joints == ("panda_finger_joint1", "panda_finger_joint2")
+    assert {j.name for j in robot.held_joints} == {"left_wheel_joint", "right_wheel_joint", *robot.gripper_joints}

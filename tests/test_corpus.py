@@ -57,7 +57,7 @@ EXPECTED = {
     "lynxmotion-al5d": ("link4", ()),
     "puma560": ("link7", ()),
     "ur5e": ("tool0", ()),
-    "stretch-re2": ("link_grasp_center", ()),
+    "stretch-re2": ("link_grasp_center", ("joint_gripper_finger_left", "joint_gripper_finger_right")),
     "finger-edu": ("finger_tip_link", ()),
 }
 #: Actuated joints: the arm's own, as its maker builds it; TALOS's description starts after its shoulder joint.

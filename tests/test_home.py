@@ -29,10 +29,6 @@ def _load(arm):
     return build_robot(arm.spec())
 
 
-#: Corpus arms whose published description has no home that passes, and why (measured).
-NO_GOOD_HOME = {
-    "vega-1u-left": "its head's collision box overlaps its torso's at the zero pose and the search finds no other home",
-}
 #: Corpus arms added with the xacro and glTF descriptions: their checks take 5-20 s each.
 LARGE = ("kuka-kr16", "kuka-kr210", "abb-irb140", "vega-1u-left", "stretch-re2")
 
@@ -42,10 +38,7 @@ def _home_arms():
         pytest.param(
             arm,
             id=arm.name,
-            marks=[
-                *([pytest.mark.slow] if arm.name in LARGE else []),
-                *([pytest.mark.xfail(strict=True, reason=NO_GOOD_HOME[arm.name])] if arm.name in NO_GOOD_HOME else []),
-            ],
+            marks=[pytest.mark.slow] if arm.name in LARGE else [],
         )
         for arm in CORPUS
     ]

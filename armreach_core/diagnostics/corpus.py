@@ -159,8 +159,7 @@ CORPUS: tuple[CorpusArm, ...] = (
         "xacro, STL meshes",
         (("unimation_puma560_description", "unimation_puma560_description"),),
     ),
-    # a two-armed upper body with glTF (.glb) visual meshes; its left hand is the arm's end, and
-    # armreach's home search finds no pose, so the URDF's zero pose is given
+    # a two-armed upper body with glTF (.glb) visual meshes; its left hand is the arm's end
     CorpusArm(
         "vega-1u-left",
         "dexmate-urdf",
@@ -168,7 +167,6 @@ CORPUS: tuple[CorpusArm, ...] = (
         "URDF, GLB visual and OBJ collision meshes",
         (("vega_1", "humanoid/vega_1"),),
         ee_link="L_ee",
-        home=(0.0,) * 9,
     ),
     # a UR5e as Drake users have it: drake:acceleration on every <limit>, the prefix never declared;
     # sphere and OBJ collision geometry; tool0 and flange bare frames

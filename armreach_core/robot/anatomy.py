@@ -268,6 +268,19 @@ class Tree:
             arm += self._moves(joint)
             link = str(joint.child)
 
+    def gripper_below(self, chain: list[str]) -> tuple[str, ...]:
+        """The gripper joints of the arm whose joints from the root are ``chain`` (an end effector given):
+        from the root, or where the tree branches above the arm (wheels, a mast, a second arm), from
+        the chain's last movable joint down."""
+        try:
+            return self.mount()[1]
+        except URDFError:
+            moving = [name for name in chain if self._moves(self.joints[name])]
+            if not moving:
+                raise
+            self.decisions.clear()
+            return self.mount(str(self.joints[moving[-1]].child), len(moving))[1]
+
     def _ambiguous(self, link: str, branches: list[Any]) -> URDFError:
         candidates = []
         for joint in branches:

@@ -107,7 +107,14 @@ def _geometry(robot: ArmKinematics) -> _Geometry:
             neighbours.add((body, other))
             neighbours.add((other, body))
     neighbours |= _telescopes(robot, group)
-    pairs = {(x, y) for x in links for y in links if group[x] == group[y] or (group[x], group[y]) in neighbours}
+    # Links no actuated joint moves apart (joined by fixed and held joints: a head held beside a torso)
+    # overlap alike in every pose: that is the description's, not the pose's.
+    arm = set(robot.joint_names)
+    moving = arm | {j.name for j in robot.held_joints if j.mimic is not None and j.mimic.joint in arm}
+    movers: dict[str, frozenset[str]] = {base: frozenset()}
+    for joint in order:
+        movers[joint.child] = movers[joint.parent] | ({joint.name} & moving)
+    pairs = {(x, y) for x in links for y in links if movers[x] == movers[y] or (group[x], group[y]) in neighbours}
     return _Geometry(points, grounded, frozenset(pairs))
 
 

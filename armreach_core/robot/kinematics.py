@@ -235,11 +235,11 @@ class ArmKinematics:
                     f"ee_link {ee_link!r} is not a link of {self.name!r}; links are: {', '.join(self.link_names)}"
                 )
             try:
-                chain = set(self._chain_to(ee_link))
+                chain = self._chain_to(ee_link)
                 self._tree.decisions.clear()
-                self.gripper_joints = tuple(j for j in self._tree.mount()[1] if j not in chain)
+                self.gripper_joints = tuple(j for j in self._tree.gripper_below(chain) if j not in chain)
                 self.anatomy = tuple(self._tree.decisions)
-            except URDFError:  # ambiguous without ee_link: no gripper to speak of
+            except URDFError:  # ambiguous even below the arm's chain: no gripper to speak of
                 pass
             self.anatomy += (f"end effector of {self.name!r}: {ee_link!r}, given as ee_link",)
         else:
