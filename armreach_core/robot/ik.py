@@ -48,6 +48,8 @@ RESTARTS = 16
 #: Further random restarts, as many times ``restarts`` again, spent only while no solution that
 #: ``accept`` takes has been found (a low target most solutions reach with a link in the ground).
 PERSISTENCE = 15
+#: Poses checked along a planned joint-space line, ends included.
+PATH_POINTS = 16
 
 
 def solve_with_restarts(
@@ -58,24 +60,28 @@ def solve_with_restarts(
     tolerance: float = 1e-4,
     seed: int = 0,
     accept: Callable[[FloatArray], bool] | None = None,
+    near: float = 0.0,
 ) -> tuple[FloatArray, float]:
     """:func:`solve` from ``q0``, then from home, then from ``restarts`` random configurations.
 
     Returns the first solution within ``tolerance`` that ``accept`` takes (so the nearest
-    start that works wins), else the first within ``tolerance``, else the best one found.
-    When solutions were found but ``accept`` took none, the search goes on for up to
-    :data:`PERSISTENCE` times ``restarts`` further random starts, stopping at the first one
-    it takes. The random
-    starts are seeded: the result is deterministic.
+    start that works wins), else the first within ``near`` that it takes (a target no pose
+    reaches exactly, such as one beside a UR's base axis), else the first within
+    ``tolerance``, else the best one found. When solutions were found but ``accept`` took
+    none, the search goes on for up to :data:`PERSISTENCE` times ``restarts`` further random
+    starts, stopping at the first one it takes. The random starts are seeded: the result is
+    deterministic.
     """
     rng = np.random.default_rng(seed)
     starts = [np.asarray(q0, dtype=np.float64), robot.home]
     best_q, best_d = robot.home, float("inf")
     fallback: FloatArray | None = None  # within tolerance, but not accepted
+    close: FloatArray | None = None  # within near (not tolerance), accepted
+    refused_close = False  # a solution within near that accept did not take
     tries = restarts + 2 + (PERSISTENCE * restarts if accept is not None else 0)
     for i in range(tries):
-        if i == restarts + 2 and fallback is None:
-            break  # no solution at all: more starts are for targets reached only in ways not accepted
+        if i == restarts + 2 and fallback is None and (close is not None or not refused_close):
+            break  # nothing was refused that more starts might find in a way accepted
         start = starts[i] if i < len(starts) else robot.sample_configurations(rng, 1)[0]
         if i >= len(starts):
             start[robot.arm_dof :] = robot.home[robot.arm_dof :]  # off-arm joints keep their home
@@ -85,8 +91,14 @@ def solve_with_restarts(
                 return q, distance
             if fallback is None:
                 fallback = q
+        elif distance < near and accept is not None and close is None:
+            if accept(q):
+                close = q
+            refused_close = close is None
         if distance < best_d:
             best_q, best_d = q, distance
+    if close is not None:
+        return close, float(np.linalg.norm(np.asarray(target) - robot.forward_kinematics(close)))
     if fallback is not None:
         return fallback, float(np.linalg.norm(np.asarray(target) - robot.forward_kinematics(fallback)))
     return best_q, best_d
@@ -128,10 +140,14 @@ class IKPolicy:
         self._goal: FloatArray | None = None
 
     def _feasible(self, start: FloatArray, goal: FloatArray) -> bool:
-        """A solution every link of which is above the ground, reached along a line the motors hold."""
-        from armreach_core.robot.home import ground_violations
+        """A solution reached along a line the motors hold, every link above the ground all the way
+        (or no lower than it is now): a UR5e's plan for a target above its base swung the arm down
+        through the floor, where it stayed."""
+        from armreach_core.robot.geometry import link_heights
 
-        return not ground_violations(self.robot, goal) and bool(holdable_paths(self.robot, start, goal)[0])
+        path = start + np.linspace(0.0, 1.0, PATH_POINTS)[:, None] * (goal - start)
+        clear = all(bool((z >= min(0.0, float(z[0]))).all()) for z in link_heights(self.robot, path).values())
+        return clear and bool(holdable_paths(self.robot, start, goal, PATH_POINTS)[0])
 
     def act(self, q: npt.ArrayLike, target: npt.ArrayLike) -> npt.NDArray[np.float32]:
         q_arr, goal = np.asarray(q, dtype=np.float64), np.asarray(target, dtype=np.float64)
@@ -144,6 +160,7 @@ class IKPolicy:
                     q_arr,
                     restarts=self.restarts,
                     accept=lambda q: self._feasible(q_arr, q),
+                    near=self.near,
                 )
             far = float(np.linalg.norm(goal - self.robot.forward_kinematics(q_arr))) > self.near
             if self._goal is not None and far:
