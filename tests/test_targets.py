@@ -140,7 +140,7 @@ IK_SEEDS = range(30_000, 30_100)
 
 
 #: Corpus arms on which the IK reference misses more than 1 % of these targets, not run here: each
-#: takes many minutes of failed 400-step episodes. IRB140 misses 13 of 100: rtb-data's description
+#: takes many minutes of failed 400-step episodes. IRB140 misses 12 of 100: rtb-data's description
 #: has meshes reaching 3.2-3.5 m from links whose joints span 2.2 m (its collision geometry is off
 #: its kinematics, which `armreach robot` reports), and the arm stops where those meshes collide
 #: with each other. Vega's left arm reaches every one since its lift's sized motor carries its
