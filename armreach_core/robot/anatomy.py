@@ -30,15 +30,16 @@ to the gripper. Every movable joint below the mount is a gripper joint. Branches
 none of these (two arms on one torso) make the end effector ambiguous: a
 :class:`~armreach_core.errors.URDFError` lists the candidates.
 
-The default end effector is a tool centre named in the URDF (:data:`~armreach_core.robot.names.TOOL_CENTRE_NAMES`, in
-that priority) rigidly attached to the mount, else the mount itself; without a gripper, the
-tool centre or the tip of the chain. When tool centres compete, one past the gripper mount
-(below it in the tree, between the fingers: a WidowX's ``ee_gripper_link`` beats its
-``ee_arm_link``) wins over those at or above the mount. Tips at the same position are
-equivalent (a UR's ``ee_link`` and ``tool0``): the first one in priority and URDF order is
-taken. Of tool centres of the same standing at different places, one hanging from the
-others through fixed joints wins (the end of a chain of tool frames: iiwa_link_ee below
-iiwa_link_ee_x); otherwise they are a real tie (an error).
+The default end effector is a tool centre named in the URDF
+(:data:`~armreach_core.robot.names.TOOL_CENTRE_NAMES`, in that priority) rigidly attached to
+the mount, else the mount itself; without a gripper, the tool centre or the tip of the chain
+(named like the arm's own links, a tip counts even if its name says finger). When tool
+centres compete, one past the gripper mount (below it in the tree, between the fingers: a
+WidowX's ``ee_gripper_link`` beats its ``ee_arm_link``) wins over those at or above the
+mount. Tips at the same position are equivalent (a UR's ``ee_link`` and ``tool0``): the
+first one in priority and URDF order is taken. Of tool centres of the same standing at
+different places, one hanging from the others through fixed joints wins (the end of a chain
+of tool frames: iiwa_link_ee below iiwa_link_ee_x); otherwise they are a real tie (an error).
 Every decision is kept with its reason (:attr:`EndEffector.decisions`) and logged.
 """
 
