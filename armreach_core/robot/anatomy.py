@@ -46,7 +46,7 @@ Every decision is kept with its reason (:attr:`EndEffector.decisions`) and logge
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -197,11 +197,14 @@ class Tree:
 
     def _named_like_the_arm(self, joint: Any) -> bool:
         """Whether ``joint`` has movable joints above it and every one of them says gripper too."""
-        above, link = [], str(joint.parent)
-        while link in self.parent_joint:
-            above += [self.parent_joint[link]] if self._moves(self.parent_joint[link]) else []
-            link = str(self.parent_joint[link].parent)
+        above = [j for j in self._joints_above(str(joint.parent)) if self._moves(j)]
         return bool(above) and all(says_gripper(j) for j in above)
+
+    def _joints_above(self, link: str) -> Iterator[Any]:
+        """The joints between ``link`` and the root, nearest first."""
+        while link in self.parent_joint:
+            yield self.parent_joint[link]
+            link = str(self.parent_joint[link].parent)
 
     def rigid_group(self, link: str) -> dict[str, npt.NDArray[np.float64]]:
         """Links rigidly attached to ``link`` (through fixed joints), with their transforms from the group's top."""
@@ -304,11 +307,7 @@ class Tree:
         return link == ancestor
 
     def _movable_above(self, link: str) -> int:
-        count = 0
-        while link in self.parent_joint:
-            count += self._moves(self.parent_joint[link])
-            link = str(self.parent_joint[link].parent)
-        return count
+        return sum(self._moves(j) for j in self._joints_above(link))
 
     # -- the end effector --------------------------------------------------------------
     def choose(self, found: tuple[str, tuple[str, ...]]) -> EndEffector:

@@ -8,7 +8,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.robot.model import FloatArray, RobotModel
-from armreach_core.robot.statics import holdable_paths
+from armreach_core.robot.statics import holdable
 
 
 def dls_step(robot: RobotModel, q: npt.ArrayLike, target: npt.ArrayLike, damping: float = 0.05) -> FloatArray:
@@ -77,10 +77,10 @@ def solve_with_restarts(
     best_q, best_d = robot.home, float("inf")
     fallback: FloatArray | None = None  # within tolerance, but not accepted
     close: FloatArray | None = None  # within near (not tolerance), accepted
-    refused_close = False  # a solution within near that accept did not take
+    refused_close = False  # a solution within near that accept did not take, and none it took
     tries = restarts + 2 + (PERSISTENCE * restarts if accept is not None else 0)
     for i in range(tries):
-        if i == restarts + 2 and fallback is None and (close is not None or not refused_close):
+        if i == restarts + 2 and fallback is None and not refused_close:
             break  # nothing was refused that more starts might find in a way accepted
         start = starts[i] if i < len(starts) else robot.sample_configurations(rng, 1)[0]
         if i >= len(starts):
@@ -113,8 +113,8 @@ class IKPolicy:
     With ``restarts`` > 0 it first plans: when the target changes it solves the inverse
     kinematics (from the current angles, then from home and ``restarts`` seeded random
     configurations, :func:`solve_with_restarts`, preferring a solution whose straight
-    joint-space path from here the motors hold against gravity,
-    :func:`armreach_core.robot.statics.holdable_paths`) and moves all joints together in joint
+    joint-space path from here the motors hold against gravity and keeps every link above the
+    ground, :data:`PATH_POINTS` poses along it) and moves all joints together in joint
     space towards that solution, switching to damped least squares within ``near`` metres of
     the target. This reaches targets where the plain closed loop stops in a local minimum
     or at a joint limit.
@@ -147,7 +147,7 @@ class IKPolicy:
 
         path = start + np.linspace(0.0, 1.0, PATH_POINTS)[:, None] * (goal - start)
         clear = all(bool((z >= min(0.0, float(z[0]))).all()) for z in link_heights(self.robot, path).values())
-        return clear and bool(holdable_paths(self.robot, start, goal, PATH_POINTS)[0])
+        return clear and bool(holdable(self.robot, path).all())
 
     def act(self, q: npt.ArrayLike, target: npt.ArrayLike) -> npt.NDArray[np.float32]:
         q_arr, goal = np.asarray(q, dtype=np.float64), np.asarray(target, dtype=np.float64)
