@@ -62,6 +62,7 @@ def test_the_learning_bench_times_a_real_command_to_held_out_success(tmp_path: P
     out = tmp_path / "bench"
     code, stdout, err = _run(
         ["bench", "--learning", "--algos", "ppo", "--seeds", "1", "--backends", "pybullet", "--out", str(out)]
+        + ["--base-position", "0", "0", "0"]  # where it always stands: the arm flags reach the command
     )
     assert code == 0, err
     data = json.loads((out / "learning.json").read_text())
@@ -73,3 +74,71 @@ def test_the_learning_bench_times_a_real_command_to_held_out_success(tmp_path: P
         run["timesteps"] == json.loads((out / "runs" / "ppo-pybullet-s0" / "checkpoint.json").read_text())["timesteps"]
     )
     assert "| pybullet | ppo | 1/1 |" in stdout
+    assert "--base-position 0.0 0.0 0.0" in (out / "runs" / "ppo-pybullet-s0" / "command.txt").read_text()
+
+
+def test_arm_flags_give_another_command_the_same_arm(tmp_path: Path) -> None:
+    """What the bench hands each ``armreach train`` it starts: parsed back, the very same arm."""
+    from armreach_core.cli import build_parser
+    from armreach_core.cli.robot_args import arm_flags, arm_spec
+    from armreach_core.diagnostics.corpus import corpus_arm
+    from armreach_core.robot.spec import ArmSpec
+
+    specs = [
+        ArmSpec(),
+        ArmSpec.create(
+            str(tmp_path / "arm.urdf.xacro"),
+            "tool0",
+            (0.1, -0.25, 1e-7),
+            base_position=(0.0, 0.5, 0.02),
+            base_orientation=(0.0, 0.0, 0.0, 1.0),
+            package_dirs={"arm_support": str(tmp_path / "arm_description"), "meshes": str(tmp_path)},
+            xacro_args={"prefix": "left_", "use_gripper": "true"},
+            allow_xacro_env=True,
+        ),
+    ]
+    for name in ("kuka-kr16", "vega-1u-left"):  # ROS packages named otherwise; an end effector named
+        arm = corpus_arm(name)
+        if arm.path is not None:
+            specs.append(arm.spec())
+    for spec in specs:
+        args = build_parser().parse_args(["train", *arm_flags(spec)])
+        assert arm_spec(args) == spec, arm_flags(spec)
+    assert arm_flags(ArmSpec()) == []
+
+
+def test_bench_arms_name_the_rows_and_the_commands(tmp_path: Path) -> None:
+    from armreach_core.rl.learning_bench import BenchArm, train_command
+
+    arm = BenchArm("so101", ("--urdf", "/x/so101.urdf", "--ee-link", "gripper"))
+    command = train_command("any-arm", "sac", "pybullet", 0, tmp_path, arm)
+    assert command[-4:] == ["--urdf", "/x/so101.urdf", "--ee-link", "gripper"]
+    assert train_command("fast", "ppo", "pybullet", 0, tmp_path)[-1] == str(tmp_path)  # the bundled arm: no flags
+
+    def record(arm: str, seconds: float) -> LearningRun:
+        return LearningRun("pybullet", "sac", 0, seconds, 1000, True, 0.98, {"setup": 0.0, "start": 0.0}, arm)
+
+    rows = summarize([record("ur5", 40.0), record("so101", 50.0), record("ur5", 60.0)])
+    assert [(row["arm"], row["seeds"]) for row in rows] == [("ur5", 2), ("so101", 1)]  # in the order they ran
+    table = to_markdown(rows)
+    assert table.splitlines()[0].startswith("| arm | backend |") and "| so101 | pybullet | sac | 1/1 | 50.0 |" in table
+    bundled = to_markdown(summarize([_run_record("ppo", 0, 30.0, True)]))
+    assert bundled.splitlines()[0].startswith("| backend |")  # no arm column when every run is on the bundled arm
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--corpus", "--urdf", "{tmp}/arm.urdf"], "drop one of them"),
+        (["--arms", "so101"], "add --corpus"),
+        (["--corpus", "--arms", "so101", "--ee-link", "tool0"], "drop --ee-link tool0"),
+        (["--urdf", "{tmp}/missing.urdf"], "missing.urdf"),
+    ],
+)
+def test_bad_arm_flags_of_the_learning_bench_exit_2_before_training(
+    tmp_path: Path, flags: list[str], message: str
+) -> None:
+    argv = ["bench", "--learning", "--out", str(tmp_path / "b"), *[f.replace("{tmp}", str(tmp_path)) for f in flags]]
+    code, _, err = _run(argv)
+    assert code == 2 and message in err and "Traceback" not in err, err
+    assert not (tmp_path / "b" / "runs").exists()

@@ -50,7 +50,8 @@ def add_parser(sub: Any) -> None:
         "--learning",
         action="store_true",
         help="time each algorithm of a preset to its held-out success threshold, over seeds, "
-        "instead of the engine benchmarks (writes learning.json and learning.md)",
+        "instead of the engine benchmarks (writes learning.json and learning.md); on the bundled arm, "
+        "the --urdf arm, or with --corpus each corpus arm (e.g. --preset any-arm --corpus --algos sac)",
     )
     learning.add_argument("--preset", default="fast", help="preset whose algorithms are timed (default: fast)")
     learning.add_argument("--algos", default=None, help="comma-separated algorithms (default: the preset's)")
@@ -168,8 +169,7 @@ def run_learning(args: argparse.Namespace) -> int:
         raise ConfigError(f"--seeds must be >= 1, got {args.seeds}")
     if args.out is None:
         raise ConfigError("--learning keeps its runs: give --out FOLDER")
-    if args.urdf is not None:
-        raise ConfigError("--learning times the preset on its own arm; drop --urdf")
+    arms = _learning_arms(args)
     preset = load_preset(args.preset)
     have = preset.algos(DEFAULT_TASK)
     algos = args.algos.split(",") if args.algos else have
@@ -183,7 +183,31 @@ def run_learning(args: argparse.Namespace) -> int:
             "add an until_success section to time it"
         )
     backends = _checked_backends(args)
-    results = bench_learning(algos, backends, args.seeds, args.out, preset=args.preset)
+    results = bench_learning(algos, backends, args.seeds, args.out, preset=args.preset, arms=arms)
     print(to_markdown(summarize(results)))
     print(f"saved {args.out / 'learning.json'} and {args.out / 'learning.md'}")
     return 0
+
+
+def _learning_arms(args: argparse.Namespace) -> list[Any]:
+    """The arms ``--learning`` trains on: the ``--urdf`` arm or the bundled one, as the robot flags
+    place it, or the corpus arms (``--corpus``, ``--arms``; those not installed are skipped with
+    a line saying how to install them)."""
+    from armreach_core.cli.checks import check_corpus_flags
+    from armreach_core.cli.robot_args import arm_flags, arm_spec
+    from armreach_core.diagnostics.corpus import for_each_corpus_arm
+    from armreach_core.errors import ConfigError
+    from armreach_core.rl.learning_bench import BUNDLED, BenchArm
+
+    check_corpus_flags(args, args.urdf)
+    if args.corpus:
+        given = arm_flags(arm_spec(args))
+        if given:
+            raise ConfigError(f"--corpus takes each corpus arm as it is listed; drop {' '.join(given)}")
+        found = for_each_corpus_arm(lambda arm, _: BenchArm(arm.name, tuple(arm_flags(arm.spec()))), arms=args.arms)
+        if not found:
+            raise ConfigError("no corpus arm is installed: make install (or pip install the packages named above)")
+        return list(found.values())
+    check_urdf(args.urdf, description_kwargs(args))
+    flags = tuple(arm_flags(arm_spec(args)))  # empty on the bundled arm as it comes
+    return [BenchArm(BUNDLED if args.urdf is None else Path(args.urdf).name.split(".")[0], flags)]

@@ -122,6 +122,39 @@ def arm_spec(args: argparse.Namespace) -> ArmSpec:
         raise ConfigError(f"arm flags: {exc}") from None
 
 
+def arm_flags(spec: ArmSpec) -> list[str]:
+    """The robot and description flags that describe ``spec`` to another ``armreach`` command
+    (the inverse of :func:`arm_spec`; a field left unset gives no flag).
+
+    Raises:
+        ConfigError: ``spec`` names a registered robot or tool joints, or allows external
+            meshes, which no flag carries.
+    """
+    if spec.robot is not None or spec.tool_joints is not None:
+        raise ConfigError(f"arm flags: no flag names a registered robot or its tool joints ({spec.to_dict()})")
+    if spec.allow_external_meshes is not None:
+        raise ConfigError("arm flags: no flag allows external meshes; set ARMREACH_ALLOW_EXTERNAL_MESHES=1 instead")
+    flags: list[str] = []
+    if spec.urdf is not None:
+        flags += ["--urdf", spec.urdf]
+    if spec.ee_link is not None:
+        flags += ["--ee-link", spec.ee_link]
+    for flag, values in (
+        ("--home", spec.home),
+        ("--base-position", spec.base_position),
+        ("--base-orientation", None if spec.base_orientation == (1.0, 0.0, 0.0, 0.0) else spec.base_orientation),
+    ):
+        if values is not None:
+            flags += [flag, *(repr(float(v)) for v in values)]
+    for name, path in spec.package_dirs or ():
+        flags += ["--package-dir", f"{name}={path}"]
+    for name, value in spec.xacro_args or ():
+        flags += ["--xacro-arg", f"{name}:={value}"]
+    if spec.allow_xacro_env:
+        flags.append("--allow-xacro-env")
+    return flags
+
+
 def robot_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     """Env keyword arguments for the robot flags that were given, as given (checked by :func:`arm_spec` first)."""
     arm_spec(args)

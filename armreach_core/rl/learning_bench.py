@@ -1,7 +1,8 @@
 """How fast the shipped presets learn: wall-clock and env steps to held-out success, per algorithm.
 
 ``armreach bench --learning`` runs ``armreach train --preset fast --algo A --seed S`` as a
-command of its own for each algorithm, backend and seed, and times it from start to end
+command of its own for each arm (the bundled one unless others are named: ``--urdf`` or
+``--corpus``), algorithm, backend and seed, and times it from start to end
 (imports, env creation and JIT compilation included), as a user would. Training stops at
 its first held-out evaluation at or above the preset's ``until_success`` threshold (the
 paper's task: 5 cm within 2,048 steps; :mod:`armreach_core.rl.validation`). Each run is
@@ -28,12 +29,23 @@ from typing import TextIO
 
 from armreach_core.diagnostics.tables import markdown_table
 from armreach_core.errors import ConfigError
+from armreach_core.plugins.defaults import DEFAULT_ROBOT
 from armreach_core.rl.stats import iqm_interval
 from armreach_core.rl.timing import PARTS, read_timing
 from armreach_core.rl.validation import stopped_early
 
 #: Episodes of the final evaluation of each run.
 FINAL_EPISODES = 100
+#: The arm a run trains on when the bench names none: the bundled one.
+BUNDLED = DEFAULT_ROBOT
+
+
+@dataclass(frozen=True)
+class BenchArm:
+    """An arm the bench trains on: its name in the tables, and the flags that give it to ``armreach train``."""
+
+    name: str = BUNDLED
+    flags: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -52,9 +64,11 @@ class LearningRun:
     final_success: float
     #: Seconds per part of the ``train`` call, plus ``start`` (the command's start-up).
     parts: dict[str, float]
+    #: The arm's name (:attr:`BenchArm.name`).
+    arm: str = BUNDLED
 
 
-def train_command(preset: str, algo: str, backend: str, seed: int, out: Path) -> list[str]:
+def train_command(preset: str, algo: str, backend: str, seed: int, out: Path, arm: BenchArm = BenchArm()) -> list[str]:
     return [
         sys.executable,
         "-m",
@@ -70,18 +84,23 @@ def train_command(preset: str, algo: str, backend: str, seed: int, out: Path) ->
         str(seed),
         "--out",
         str(out),
+        *arm.flags,
     ]
 
 
-def run_one(preset: str, algo: str, backend: str, seed: int, out: Path) -> LearningRun:
+def run_one(preset: str, algo: str, backend: str, seed: int, out: Path, arm: BenchArm = BenchArm()) -> LearningRun:
     """Train one seed as its own command, then evaluate it."""
     from armreach_core.rl.evaluate import evaluate_run
 
     t0 = time.perf_counter()
-    done = subprocess.run(train_command(preset, algo, backend, seed, out), capture_output=True, text=True, check=False)
+    command = train_command(preset, algo, backend, seed, out, arm)
+    done = subprocess.run(command, capture_output=True, text=True, check=False)
     seconds = time.perf_counter() - t0
     if done.returncode != 0:
-        raise ConfigError(f"`armreach train` failed for {algo} on {backend}, seed {seed}: {done.stderr.strip()[-500:]}")
+        raise ConfigError(
+            f"`armreach train` failed for {algo} on {backend}, arm {arm.name}, seed {seed}: "
+            + done.stderr.strip()[-500:]
+        )
     timing = read_timing(out)
     parts = {part: timing.get(part, 0.0) for part in PARTS}
     parts["start"] = max(seconds - timing.get("total", seconds), 0.0)
@@ -96,6 +115,7 @@ def run_one(preset: str, algo: str, backend: str, seed: int, out: Path) -> Learn
         stopped_early(out),
         float(final),
         parts,
+        arm.name,
     )
 
 
@@ -106,37 +126,44 @@ def bench_learning(
     out: Path,
     *,
     preset: str = "fast",
+    arms: Sequence[BenchArm] = (BenchArm(),),
     stream: TextIO | None = sys.stderr,
 ) -> list[LearningRun]:
-    """Every (backend, algo, seed) in turn; the runs stay in ``out/runs/`` and the results in ``out``."""
+    """Every (arm, backend, algo, seed) in turn; the runs stay in ``out/runs/`` (a folder per
+    run, named after its arm unless that is the bundled one) and the results in ``out``."""
     results: list[LearningRun] = []
-    for backend in backends:
-        for algo in algos:
-            for seed in range(seeds):
-                run = run_one(preset, algo, backend, seed, out / "runs" / f"{algo}-{backend}-s{seed}")
-                results.append(run)
-                if stream is not None:
-                    state = "reached" if run.reached else "not reached"
-                    print(
-                        f"{algo} on {backend}, seed {seed}: {state} after {run.timesteps:,} steps, "
-                        f"{run.seconds:.1f} s; final {100 * run.final_success:.0f} %",
-                        file=stream,
-                    )
+    for arm in arms:
+        on = "" if arm.name == BUNDLED else f"{arm.name}-"
+        for backend in backends:
+            for algo in algos:
+                for seed in range(seeds):
+                    run = run_one(preset, algo, backend, seed, out / "runs" / f"{on}{algo}-{backend}-s{seed}", arm)
+                    results.append(run)
+                    if stream is not None:
+                        state = "reached" if run.reached else "not reached"
+                        print(
+                            f"{on}{algo} on {backend}, seed {seed}: {state} after {run.timesteps:,} steps, "
+                            f"{run.seconds:.1f} s; final {100 * run.final_success:.0f} %",
+                            file=stream,
+                        )
     save(results, out, preset)
     return results
 
 
 def summarize(results: Sequence[LearningRun]) -> list[dict[str, object]]:
-    """One row per (backend, algo): seeds reached, IQMs with intervals, final success, time shares."""
+    """One row per (arm, backend, algo), arms in the order they ran: seeds reached, IQMs with
+    intervals, final success, time shares."""
     rows: list[dict[str, object]] = []
-    keys = sorted({(r.backend, r.algo) for r in results}, key=lambda k: (k[0], k[1]))
-    for backend, algo in keys:
-        runs = [r for r in results if (r.backend, r.algo) == (backend, algo)]
+    order = list(dict.fromkeys(r.arm for r in results))
+    keys = sorted({(r.arm, r.backend, r.algo) for r in results}, key=lambda k: (order.index(k[0]), k[1], k[2]))
+    for arm, backend, algo in keys:
+        runs = [r for r in results if (r.arm, r.backend, r.algo) == (arm, backend, algo)]
         reached = [r for r in runs if r.reached]
         total = sum(r.seconds for r in runs)
         shares = {part: sum(r.parts.get(part, 0.0) for r in runs) / total for part in (*PARTS, "start")}
         rows.append(
             {
+                "arm": arm,
                 "backend": backend,
                 "algo": algo,
                 "seeds": len(runs),
@@ -168,8 +195,10 @@ def to_markdown(rows: Sequence[dict[str, object]]) -> str:
         return " / ".join([*shown, f"start {100 * rest:.0f}"]) + " %"
 
     header = ["backend", "algorithm", "stopped early", "command wall-clock (s)", "env steps", "final success", "time"]
+    named = any(row.get("arm", BUNDLED) != BUNDLED for row in rows)  # an arm column only when it says something
     body = [
         [
+            *([str(row["arm"])] if named else []),
             str(row["backend"]),
             str(row["algo"]),
             f"{row['reached']}/{row['seeds']}",
@@ -180,7 +209,7 @@ def to_markdown(rows: Sequence[dict[str, object]]) -> str:
         ]
         for row in rows
     ]
-    return markdown_table(header, body)
+    return markdown_table(["arm", *header] if named else header, body)
 
 
 def save(results: Sequence[LearningRun], out: Path, preset: str) -> tuple[Path, Path]:
