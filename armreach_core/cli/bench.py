@@ -210,4 +210,4 @@ def _learning_arms(args: argparse.Namespace) -> list[Any]:
         return list(found.values())
     check_urdf(args.urdf, description_kwargs(args))
     flags = tuple(arm_flags(arm_spec(args)))  # empty on the bundled arm as it comes
-    return [BenchArm(BUNDLED if args.urdf is None else Path(args.urdf).name.split(".")[0], flags)]
+    return [BenchArm(BUNDLED if args.urdf is None else Path(args.urdf).stem, flags)]  # labelled as a sweep labels it

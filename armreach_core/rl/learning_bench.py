@@ -195,7 +195,7 @@ def to_markdown(rows: Sequence[dict[str, object]]) -> str:
         return " / ".join([*shown, f"start {100 * rest:.0f}"]) + " %"
 
     header = ["backend", "algorithm", "stopped early", "command wall-clock (s)", "env steps", "final success", "time"]
-    named = any(row.get("arm", BUNDLED) != BUNDLED for row in rows)  # an arm column only when it says something
+    named = any(row["arm"] != BUNDLED for row in rows)  # an arm column only when it says something
     body = [
         [
             *([str(row["arm"])] if named else []),
