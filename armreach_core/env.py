@@ -7,9 +7,7 @@ engine lives behind :class:`~armreach_core.backend.Backend` and the scoring behi
 
 from __future__ import annotations
 
-import math
 import os
-import sys
 import time
 from collections import deque
 from collections.abc import Mapping
@@ -19,9 +17,10 @@ import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.actions import checked_action, require_display
 from armreach_core.backend import ArmState, Backend, Camera, PhysicsConfig
 from armreach_core.engine_errors import engine_failure
-from armreach_core.errors import ActionError, ArmReachError, ConfigError, DisplayUnavailableError
+from armreach_core.errors import ArmReachError, ConfigError
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 from armreach_core.plugins.lookup import load_backend_class, load_robot, resolve_arm, task_spec
 from armreach_core.robot.factory import build_robot
@@ -36,17 +35,6 @@ JOINT_LIMIT_MODES = ("clip", "terminate")
 #: (m) taken as physics rather than a numerical blow-up.
 STATE_LIMIT = 1e6
 #: Action dtypes accepted: numbers that are real (bool, complex, text and objects are refused).
-_ACTION_KINDS = "iuf"
-
-
-def require_display() -> None:
-    """Raise :class:`DisplayUnavailableError`, saying how to get a display, when a window cannot open."""
-    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise DisplayUnavailableError(
-            "render_mode='human' opens a window, but there is no display (DISPLAY is not set). On a desktop, run "
-            "from its terminal; on a server, run under a virtual display: `apt-get install xvfb` and prefix the "
-            "command with `xvfb-run -a`, or use render_mode='rgb_array' for images without a display"
-        )
 
 
 class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
@@ -64,6 +52,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         robot: a registered robot name instead of ``urdf``.
         home: initial joint configuration (rad); default the robot's home.
         max_joint_step: joint change (rad) for an action of 1, default 0.05.
+        joint_velocity_limits: no joint's target moves by more than its URDF velocity limit
+            times the control period (:attr:`velocity_step`) in one step, default True
+            (``False``: every joint moves up to ``max_joint_step``, ids before ``Reach-v3``).
         timestep, substeps: physics step (s) and steps per action; default 1/240 and 10.
         max_episode_steps: truncation (steps) of an env constructed directly; default the
             task's registered limit (``TaskSpec.max_episode_steps``). Under ``gym.make``
@@ -109,6 +100,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         robot: str | None = None,
         home: npt.ArrayLike | None = None,
         max_joint_step: float = 0.05,
+        joint_velocity_limits: bool = True,
         timestep: float = 1.0 / 240.0,
         substeps: int = 10,
         max_episode_steps: int | None = None,
@@ -187,6 +179,13 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             iterative_solver=iterative_solver,
             merge_fixed_links=merge_fixed_links,
         )
+        #: Whether joint targets move at most at the URDF's velocity limits (``joint_velocity_limits``).
+        self.joint_velocity_limits = bool(joint_velocity_limits)
+        #: Largest change of each joint's target in one step, its velocity limit times the control
+        #: period (rad or m); ``None`` when ``joint_velocity_limits`` is off.
+        self.velocity_step: npt.NDArray[np.float64] | None = (
+            self.robot.velocity_limits * self.physics.control_dt if joint_velocity_limits else None
+        )
         self.camera = camera or Camera()
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.physics.control_dt)}
         try:
@@ -197,6 +196,12 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self._task_ends = type(self.task).ended is not Task.ended
 
         self._action_shape = (self.task.action_size(),)
+        size = self._action_shape[0]
+        self._action_meaning = (  # what an action is, for the error a wrong shape gets
+            f"one value in [-1, 1] per joint {list(self.robot.joint_names)}"
+            if size == self.robot.dof
+            else f"values in [-1, 1] as task {task!r} defines them"
+        )
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=self._action_shape, dtype=np.float32)
         self.observation_space = self.task.observation_space()
         if isinstance(self.observation_space, gym.spaces.Dict) and "desired_goal" in self.observation_space.spaces:
@@ -244,40 +249,30 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             raise ArmReachError("the env is closed; create a new one")
         return self._backend
 
+    @property
+    def joint_step(self) -> npt.NDArray[np.float64]:
+        """Each joint's change for an action of 1: ``max_joint_step``, at most :attr:`velocity_step`."""
+        step = np.full(self.robot.dof, self.max_joint_step)
+        return step if self.velocity_step is None else np.minimum(step, self.velocity_step)
+
+    def joint_targets(self, action: npt.NDArray[np.float64], q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """The task's joint targets for ``action`` (in [-1, 1]) from angles ``q``, each within :attr:`velocity_step`.
+
+        The targets before the joint limits: :meth:`step` clips them into the limits (or ends the
+        episode there); a real arm's loop does the same through its safety layer.
+        """
+        target = self.task.joint_targets(action, q, self.max_joint_step)
+        cap = self.velocity_step
+        if cap is None:
+            return target
+        change = target - q
+        np.minimum(change, cap, out=change)
+        np.maximum(change, -cap, out=change)
+        return q + change
+
     def _check_action(self, action: Any) -> npt.NDArray[np.float64]:
         """The action as float64, clipped into [-1, 1]; :class:`ActionError` if it is not a usable action."""
-        if type(action) is np.ndarray and action.shape == self._action_shape and action.dtype.kind == "f":
-            arr = action.astype(np.float64)  # the common case, checked in a fraction of the general path
-        else:
-            arr = self._convert_action(action)
-        values = arr.tolist()
-        # A finite sum means finite values (a sum that overflows goes on to the exact check).
-        if math.isfinite(sum(values)):
-            if min(values) >= -1.0 and max(values) <= 1.0:
-                return arr  # nothing to clip: most actions, without a numpy call
-        elif not np.isfinite(arr).all():
-            raise ActionError(f"action contains NaN or inf: {values}; the env's state is unchanged")
-        return np.minimum(np.maximum(arr, -1.0, out=arr), 1.0, out=arr)
-
-    def _convert_action(self, action: Any) -> npt.NDArray[np.float64]:
-        try:
-            raw = np.asarray(action)
-        except Exception as exc:  # ragged sequences, objects whose __array__ raises
-            raise ActionError(f"action {action!r} is not an array of numbers: {exc}") from None
-        if raw.dtype.kind not in _ACTION_KINDS:
-            raise ActionError(
-                f"action has dtype {raw.dtype} ({raw.dtype.kind!r}); it must hold real numbers (float or int), "
-                "not booleans, complex numbers, strings or objects; the env's state is unchanged"
-            )
-        if raw.shape != self._action_shape:
-            size = self._action_shape[0]
-            what = (
-                f"one value in [-1, 1] per joint {list(self.robot.joint_names)}"
-                if size == self.robot.dof
-                else f"values in [-1, 1] as task {self.task_name!r} defines them"
-            )
-            raise ActionError(f"action has shape {raw.shape}, expected ({size},): {what}")
-        return raw.astype(np.float64)
+        return checked_action(action, self._action_shape, self._action_meaning)
 
     # -- Gymnasium API -----------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
@@ -307,7 +302,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         if self._state is None:
             raise ArmReachError("call reset() before step()")
         backend = self.backend
-        target = self.task.joint_targets(self._check_action(action), self._state.q, self.max_joint_step)
+        target = self.joint_targets(self._check_action(action), self._state.q)
         clipped = np.minimum(np.maximum(target, self.robot.lower), self.robot.upper)
         excess = target - clipped
         violated = bool(excess.dot(excess) > 0.0)  # one call instead of two comparisons and reductions

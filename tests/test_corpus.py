@@ -173,7 +173,7 @@ def test_held_joints_cover_every_movable_joint_not_actuated(arm: CorpusArm) -> N
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("arm", _arms())
 def test_check_env(arm: CorpusArm, backend: str) -> None:
-    env = gym.make("armreach/Reach-v2", **_kwargs(arm), backend=backend)
+    env = gym.make("armreach/Reach-v3", **_kwargs(arm), backend=backend)
     try:
         check_env(env.unwrapped, skip_render_check=True)
         # and a longer check: an episode replays exactly after other episodes
@@ -308,7 +308,7 @@ def test_held_joints_are_reset_and_held(arm: CorpusArm, backend: str) -> None:
 @pytest.mark.parametrize("arm", _arms())
 def test_observation_is_one_consistent_snapshot(arm: CorpusArm, backend: str) -> None:
     """The observed end effector is the URDF's forward kinematics of the observed joint angles."""
-    env = gym.make("armreach/Reach-v2", **_kwargs(arm), backend=backend)
+    env = gym.make("armreach/Reach-v3", **_kwargs(arm), backend=backend)
     try:
         task, robot = env.unwrapped.task, env.unwrapped.robot
         parts = task.layout.slices

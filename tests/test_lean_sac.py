@@ -16,7 +16,7 @@ pytestmark = pytest.mark.training
 
 
 def _trained(cls: type[Any], steps: int = 160) -> Any:
-    env = make_vec_env("armreach/Reach-v2", n_envs=1, seed=4, env_kwargs={"backend": "pybullet"})
+    env = make_vec_env("armreach/Reach-v3", n_envs=1, seed=4, env_kwargs={"backend": "pybullet"})
     model = cls("MlpPolicy", env, learning_starts=40, batch_size=32, seed=2, policy_kwargs={"net_arch": [32, 32]})
     return model.learn(steps)
 

@@ -238,7 +238,7 @@ def test_scripted_reach_succeeds(seed):
     env = ArmReach6DOFEnv(backend="mujoco")
     obs, info = env.reset(seed=seed)
     robot = env.unwrapped.robot
-    policy = IKPolicy(robot, env.unwrapped.max_joint_step)
+    policy = IKPolicy(robot, env.unwrapped.max_joint_step, joint_step=env.unwrapped.joint_step)
     for _ in range(40):
         obs, _, terminated, _, info = env.step(policy.act(obs[:6], obs[9:12]))
         if terminated:

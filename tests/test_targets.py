@@ -102,7 +102,7 @@ def test_reach_v0_keeps_its_targets_and_v2_draws_the_same_ones_where_they_clear_
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         old = gym.make("armreach/Reach-v0", urdf=urdf, backend="pybullet").unwrapped
-    new = gym.make("armreach/Reach-v2", urdf=urdf, backend="pybullet").unwrapped
+    new = gym.make("armreach/Reach-v3", urdf=urdf, backend="pybullet").unwrapped
     engine = _Engine(new.robot)  # type: ignore[attr-defined]
     touching = 0
     try:
@@ -127,10 +127,10 @@ def test_reach_v0_warns_names_its_successor_and_draws_its_old_targets() -> None:
         warnings.simplefilter("always")
         old = gym.make("armreach/Reach-v0", backend="pybullet")
     said = [str(w.message) for w in caught if issubclass(w.category, DeprecationWarning)]
-    assert any("armreach/Reach-v0 is deprecated: use armreach/Reach-v2" in text for text in said), said
+    assert any("armreach/Reach-v0 is deprecated: use armreach/Reach-v3" in text for text in said), said
     assert old.unwrapped.task.sampler.clear_of_arm is None  # type: ignore[attr-defined]
     old.close()
-    new = gym.make("armreach/Reach-v2", backend="pybullet")
+    new = gym.make("armreach/Reach-v3", backend="pybullet")
     assert new.unwrapped.task.sampler.clear_of_arm == new.unwrapped.task.success_threshold  # type: ignore[attr-defined]
     new.close()
 
@@ -166,7 +166,7 @@ def test_the_ik_reference_reaches_nearly_every_target_on_every_corpus_arm(arm: A
     try:
         for seed in IK_SEEDS:
             env.reset(seed=seed)
-            policy = IKPolicy(env.robot, env.max_joint_step, restarts=RESTARTS)
+            policy = IKPolicy(env.robot, env.max_joint_step, joint_step=env.joint_step, restarts=RESTARTS)
             target: Any = env.task.target  # type: ignore[attr-defined]
             while True:
                 _, _, terminated, truncated, info = env.step(policy.act(env.backend.joint_state()[0], target))
@@ -192,7 +192,7 @@ def test_a_target_no_pose_reaches_exactly_is_reached_along_a_path_clear_of_the_g
     try:
         env.reset(seed=0)
         env.task.target = target  # type: ignore[attr-defined]
-        policy = IKPolicy(env.robot, env.max_joint_step, restarts=RESTARTS)
+        policy = IKPolicy(env.robot, env.max_joint_step, joint_step=env.joint_step, restarts=RESTARTS)
         start = env.backend.joint_state()[0]
         policy.act(start, target)
         goal = policy._goal

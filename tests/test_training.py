@@ -363,7 +363,7 @@ def test_evaluation_is_the_papers_task_whatever_training_used() -> None:
     evaluation = env_kwargs(config, evaluation=True)
     assert training["max_episode_steps"] == 100
     assert evaluation == {"max_episode_steps": 2048, "joint_limit_mode": "terminate", "task": "reach",
-                          "backend": "pybullet"}  # fmt: skip
+                          "backend": "pybullet", "joint_velocity_limits": True}  # fmt: skip
     assert env_kwargs(config, backend="mujoco", evaluation=True)["backend"] == "mujoco"
 
 
@@ -535,9 +535,12 @@ def test_a_run_folder_in_todays_format_reads_back_evaluates_and_resumes(tmp_path
     command = ["train", "--algo", "ddpg", "--preset", tiny, "--steps", "150", "--learner", "sb3"]
     assert main([*command, "--out", str(run_dir)]) == 0
     todays = TODAYS_CONFIG.format(preset=Path(tiny).resolve())
-    # the format has not changed; runs now record their learner
-    assert (run_dir / "config.yaml").read_text() == todays + "  learner: sb3\narm: {}\n"
-    # A run written before learners existed is an SB3 run.
+    # the format has not changed; runs now record their learner and the env's velocity rule
+    written = todays.replace(
+        "    max_episode_steps: 64\n", "    max_episode_steps: 64\n    joint_velocity_limits: true\n"
+    )
+    assert (run_dir / "config.yaml").read_text() == written + "  learner: sb3\narm: {}\n"
+    # A run written before learners existed is an SB3 run, and one written before the rule runs without it.
     # A key this version does not know (a newer version's, or a note by hand) is kept and otherwise ignored.
     (run_dir / "config.yaml").write_text(todays + "note: by hand\n")
     config = runs.read_config(run_dir)
@@ -622,7 +625,7 @@ sys.modules["stable_baselines3"] = None  # as if it were not installed
 import gymnasium as gym
 import armreach_core
 from armreach_core.errors import MissingExtraError
-env = gym.make("armreach/Reach-v2")
+env = gym.make("armreach/Reach-v3")
 env.reset(seed=0)
 env.step(env.action_space.sample())
 env.close()

@@ -70,7 +70,7 @@ def rollout(
             raise ConfigError(f"task {task!r} has no reference controller; use --policy ik or random")
         obs, info = env.reset(seed=seed)
         env.action_space.seed(seed)
-        ik = IKPolicy(env.robot, env.max_joint_step, restarts=RESTARTS)
+        ik = IKPolicy(env.robot, env.max_joint_step, joint_step=env.joint_step, restarts=RESTARTS)
         touches = 0
         frames = [env.backend.render(env.camera)]
         steps, total = 0, 0.0
@@ -83,10 +83,8 @@ def rollout(
                 action = ik.act(q, env.task.target)  # type: ignore[attr-defined]
             else:
                 action = env.action_space.sample()
-            if joint_log:  # the target the env sends for this action (its rule: the task's, clipped to the limits)
-                target = env.task.joint_targets(
-                    np.clip(np.asarray(action, dtype=np.float64), -1, 1), q, env.max_joint_step
-                )
+            if joint_log:  # the target the env sends for this action (the task's, at most the velocity limits away)
+                target = env.joint_targets(np.clip(np.asarray(action, dtype=np.float64), -1, 1), q)
                 rows.append((q, qd, env.robot.clip(target)))
             obs, reward, terminated, truncated, info = env.step(action)
             touches += int(info.get("collision", False))

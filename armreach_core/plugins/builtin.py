@@ -22,15 +22,22 @@ def armreach_register_tasks(register: Register) -> None:
     register(
         TaskSpec(
             name=DEFAULT_TASK,
-            env_id="armreach/Reach-v2",
+            env_id="armreach/Reach-v3",
             deprecated_ids={
                 "armreach/Reach-v0": {
                     "targets_clear_of_arm": False,
                     "engine_drag": True,
                     "iterative_solver": True,
                     "merge_fixed_links": False,
+                    "joint_velocity_limits": False,
                 },
-                "armreach/Reach-v1": {"engine_drag": True, "iterative_solver": True, "merge_fixed_links": False},
+                "armreach/Reach-v1": {
+                    "engine_drag": True,
+                    "iterative_solver": True,
+                    "merge_fixed_links": False,
+                    "joint_velocity_limits": False,
+                },
+                "armreach/Reach-v2": {"joint_velocity_limits": False},
             },
             load="armreach_core.tasks.reach.task:ReachTask",
             robot=DEFAULT_ROBOT,

@@ -34,7 +34,7 @@ class Agent(Protocol):
 
 
 #: Env settings evaluation keeps from training: they define what an action means.
-ACTION_SETTINGS = ("max_joint_step", "substeps")
+ACTION_SETTINGS = ("max_joint_step", "substeps", "joint_velocity_limits")
 #: The arm itself (where it starts and sits, where its ROS packages are, its xacro arguments):
 #: kept by evaluation like the action's meaning.
 PLACEMENT_SETTINGS = tuple(key for key in ARM_KEYS if key not in ("urdf", "ee_link", "robot"))
@@ -48,6 +48,7 @@ def env_kwargs(config: RunConfig, *, backend: str | None = None, evaluation: boo
     success radius and the paper's reward; only the action's meaning is kept.
     """
     kwargs = config.env_settings
+    kwargs.setdefault("joint_velocity_limits", False)  # a run recorded before the env honoured them
     kwargs.pop("randomize", None)  # a wrapper, not an env argument: see make_vec_env
     if evaluation:
         kwargs = {k: v for k, v in kwargs.items() if k in ACTION_SETTINGS + PLACEMENT_SETTINGS}
@@ -225,7 +226,9 @@ class IKAgent:
 
     def act(self, obs: Any, env: ArmEnv) -> npt.NDArray[np.float32]:
         if self._policy is None or self._policy.robot is not env.robot:
-            self._policy = IKPolicy(env.robot, env.max_joint_step, damping=self.damping, restarts=RESTARTS)
+            self._policy = IKPolicy(
+                env.robot, env.max_joint_step, joint_step=env.joint_step, damping=self.damping, restarts=RESTARTS
+            )
         target = getattr(env.task, "target", None)
         if target is None:
             raise ConfigError(f"the IK controller needs a task with a target position; {env.task_name!r} has none")

@@ -306,6 +306,11 @@ def resolve_config(
                 f"with HER, learning_starts ({starts}) must be at least the training episode length ({episode}): "
                 "HER cannot sample before the first episode ends"
             )
+    # What the env does with the URDF's velocity limits, recorded: a config without it is older than that rule.
+    settings["env"] = {
+        **settings.get("env", {}),
+        "joint_velocity_limits": bool(settings.get("env", {}).get("joint_velocity_limits", True)),
+    }
     total = int(steps if steps is not None else settings.get("timesteps", 100_000))
     if total < 1 and algo != "ik" and "imitation" not in settings:
         raise ConfigError(f"--steps must be positive, got {total} (0 only with the preset key imitation)")
@@ -353,7 +358,22 @@ def config_mismatch(stored: RunConfig, wanted: RunConfig) -> list[str]:
         if getattr(stored, key) != getattr(wanted, key)
     ]
     a, b = stored.settings, wanted.settings
+    if "joint_velocity_limits" not in (a.get("env") or {}) and (b.get("env") or {}).get("joint_velocity_limits"):
+        # Recorded before the env honoured velocity limits: the same run where no limit binds.
+        a = {**a, "env": {**(a.get("env") or {}), "joint_velocity_limits": not velocity_limits_bind(stored)}}
     for key in sorted(set(a) | set(b)):
         if key not in RUNTIME_ONLY and key != "timesteps" and a.get(key) != b.get(key):
             out.append(f"{key}: {a.get(key)!r} here, {b.get(key)!r} asked")
     return out
+
+
+def velocity_limits_bind(config: RunConfig) -> bool:
+    """Whether a joint of the run's arm moves slower under its URDF velocity limit than ``max_joint_step`` allows."""
+    from armreach_core.backend import PhysicsConfig
+    from armreach_core.plugins.lookup import resolve_arm
+    from armreach_core.robot.factory import build_robot
+
+    env = config.env_settings
+    robot = build_robot(resolve_arm(config.arm, config.task)[0])
+    control_dt = PhysicsConfig(substeps=int(env.get("substeps", 10))).control_dt
+    return bool((robot.velocity_limits * control_dt < float(env.get("max_joint_step", 0.05))).any())

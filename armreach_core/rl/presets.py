@@ -130,6 +130,7 @@ def _physics(key: str, value: Any) -> str:
 ENV_SCHEMA: dict[str, Check] = {
     "max_episode_steps": _num(int, 1),
     "max_joint_step": _num(float, 0.0, 1.0, lo_open=True),
+    "joint_velocity_limits": _bool,
     "joint_limit_mode": _choice("clip", "terminate"),
     "joint_limit_penalty": _num(float, 0.0),
     "success_threshold": _num(float, 0.0, lo_open=True),

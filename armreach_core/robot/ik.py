@@ -118,6 +118,12 @@ class IKPolicy:
     space towards that solution, switching to damped least squares within ``near`` metres of
     the target. This reaches targets where the plain closed loop stops in a local minimum
     or at a joint limit.
+
+    ``max_joint_step`` is the env's joint change for an action of 1; ``joint_step`` each
+    joint's largest change in one step (the env's ``joint_step``: its velocity limit over
+    the control period where that is less), default ``max_joint_step`` for every joint.
+    The planned move keeps every joint within its ``joint_step``, so all joints still
+    arrive together.
     """
 
     def __init__(
@@ -129,9 +135,15 @@ class IKPolicy:
         *,
         restarts: int = 0,
         near: float = 0.02,
+        joint_step: npt.ArrayLike | None = None,
     ) -> None:
         self.robot = robot
         self.max_joint_step = max_joint_step
+        self.joint_step: FloatArray = (
+            np.full(robot.dof, float(max_joint_step))
+            if joint_step is None
+            else np.broadcast_to(np.asarray(joint_step, dtype=np.float64), (robot.dof,)).copy()
+        )
         self.damping = damping
         self.gain = gain
         self.restarts = restarts
@@ -165,7 +177,7 @@ class IKPolicy:
             far = float(np.linalg.norm(goal - self.robot.forward_kinematics(q_arr))) > self.near
             if self._goal is not None and far:
                 dq = self._goal - q_arr
-                scale = max(1.0, float(np.max(np.abs(dq))) / self.max_joint_step)
+                scale = max(1.0, float(np.max(np.abs(dq) / self.joint_step)))
                 return np.clip(dq / (scale * self.max_joint_step), -1.0, 1.0).astype(np.float32)
         dq = self.gain * dls_step(self.robot, q_arr, goal, self.damping)
         return np.clip(dq / self.max_joint_step, -1.0, 1.0).astype(np.float32)

@@ -72,8 +72,12 @@ def policy_card(env: ArmEnv, algo: str, learner: str, keys: list[str] | None, ru
             "size": int(env.action_space.shape[0]),  # type: ignore[index]
             "low": -1.0,
             "high": 1.0,
-            "meaning": "joint target = measured joint position + action * max_joint_step, clipped to the limits",
+            "meaning": (
+                "joint target = measured joint position + action * max_joint_step, each joint's change at most "
+                "its velocity limit * control_dt when joint_velocity_limits is true, clipped to the limits"
+            ),
             "max_joint_step": env.max_joint_step,
+            "joint_velocity_limits": env.joint_velocity_limits,
         },
         "control_dt": env.physics.control_dt,
         "control_hz": 1.0 / env.physics.control_dt,

@@ -50,7 +50,14 @@ class DeployResult:
 def twin_env(card: dict[str, Any], backend: str) -> ArmEnv:
     """An env for the card's arm and task: its task builds observations and draws targets."""
     arm = ArmSpec.from_mapping({k: v for k, v in card["arm"].items() if k in ARM_KEYS}, "card.json arm")
-    return ArmEnv(card["task"], backend=backend, arm=arm, max_joint_step=card["action"]["max_joint_step"])
+    action = card["action"]
+    return ArmEnv(
+        card["task"],
+        backend=backend,
+        arm=arm,
+        max_joint_step=action["max_joint_step"],
+        joint_velocity_limits=bool(action.get("joint_velocity_limits", False)),  # cards before it: no cap
+    )
 
 
 def deploy(
@@ -97,7 +104,7 @@ def deploy(
                         reached = True
                         break
                     action = policy.act(env.task.observation(state))
-                    wanted = env.task.joint_targets(np.asarray(action, np.float64), q, env.max_joint_step)
+                    wanted = env.joint_targets(np.asarray(action, np.float64), q)
                 decision = safety.decide(step, q, qd, reading.stamp, t0, cycle, wanted)
                 driver.send(decision.target)
                 result.trips += decision.trips

@@ -56,7 +56,7 @@ def shadow(
         for q, qd, out in ((q_live, np.zeros_like(q_live), targets), (q_twin, qd_twin, None)):
             state = ArmState(q, qd, robot.forward_kinematics(q))
             action = policy.act(env.task.observation(state))
-            target = robot.clip(env.task.joint_targets(np.asarray(action, np.float64), q, env.max_joint_step))
+            target = robot.clip(env.joint_targets(np.asarray(action, np.float64), q))
             if out is None:
                 twin.set_joint_targets(target)
             else:

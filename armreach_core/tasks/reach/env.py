@@ -20,15 +20,16 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     self-collision is off unless ``self_collision=True`` (parent/child pairs excluded), and
     inertias come from the URDF (``inertia_from_file=True``).
 
-    Made with ``gym.make("armreach/Reach-v2", backend="pybullet", urdf=None,
+    Made with ``gym.make("armreach/Reach-v3", backend="pybullet", urdf=None,
     ee_link=None, render_mode=None)`` after ``import armreach_core``, or by calling this
     class with the same keyword arguments.
 
     ## Action space
 
     ``Box(-1, 1, (n,), float32)``, one value per actuated joint (n = 6 for the bundled
-    arm). The joint position target is ``θ + a · max_joint_step`` (default 0.05 rad),
-    applied through the backend's position control for ``substeps`` physics steps
+    arm). The joint position target is ``θ + a · max_joint_step`` (default 0.05 rad), each
+    joint's change at most its URDF velocity limit times the control period
+    (``joint_velocity_limits``; ``env.joint_step`` per joint), applied through the backend's position control for ``substeps`` physics steps
     (default 10 × 1/240 s, so the env runs at 24 Hz). Actions outside [-1, 1] are
     clipped into it; NaN, inf, a wrong shape or a dtype that is not real numbers (bool,
     complex, str, object) raise :class:`~armreach_core.ActionError` and leave the state
@@ -89,7 +90,7 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
 
     The arm, the backend and the physics: see :class:`~armreach_core.env.ArmEnv`
     (``backend``, ``urdf``, ``robot``, ``ee_link``, ``home``, ``render_mode``,
-    ``max_joint_step``, ``timestep``, ``substeps``, ``max_episode_steps``,
+    ``max_joint_step``, ``joint_velocity_limits``, ``timestep``, ``substeps``, ``max_episode_steps``,
     ``joint_limit_mode``, ``joint_limit_penalty``, ...). The reach task adds:
 
     | argument | default | meaning |

@@ -29,9 +29,15 @@ def armreach_register_tasks(register: Register) -> None:
     register(
         TaskSpec(
             name="grasp",
-            env_id="armreach/Grasp-v1",
+            env_id="armreach/Grasp-v2",
             deprecated_ids={
-                "armreach/Grasp-v0": {"engine_drag": True, "iterative_solver": True, "merge_fixed_links": False}
+                "armreach/Grasp-v0": {
+                    "engine_drag": True,
+                    "iterative_solver": True,
+                    "merge_fixed_links": False,
+                    "joint_velocity_limits": False,
+                },
+                "armreach/Grasp-v1": {"joint_velocity_limits": False},
             },
             load="armreach_grasp.task:GraspTask",
             robot=ROBOT,
