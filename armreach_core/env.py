@@ -194,6 +194,11 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             raise ConfigError(f"bad option for task {task!r}: {exc}") from exc
         # whether the task ends episodes for reasons of its own (reach never does: no call per step)
         self._task_ends = type(self.task).ended is not Task.ended
+        # The cap each step applies: none where the task's own mapping never moves a joint past it
+        # (the default one moves each by at most max_joint_step), as on the bundled arm.
+        cap = self.velocity_step
+        default_mapping = type(self.task).joint_targets is Task.joint_targets
+        self._velocity_cap = None if cap is None or (default_mapping and (cap >= self.max_joint_step).all()) else cap
 
         self._action_shape = (self.task.action_size(),)
         size = self._action_shape[0]
@@ -262,7 +267,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         episode there); a real arm's loop does the same through its safety layer.
         """
         target = self.task.joint_targets(action, q, self.max_joint_step)
-        cap = self.velocity_step
+        cap = self._velocity_cap
         if cap is None:
             return target
         change = target - q

@@ -138,3 +138,21 @@ def test_a_card_records_the_rule_and_a_card_without_it_gives_a_twin_without_it()
     twin = twin_env(card, BACKENDS[0])
     assert twin.joint_velocity_limits is False
     twin.close()
+
+
+def test_armreach_robot_shows_each_joints_step_and_which_its_velocity_limit_sets(
+    slow_arm: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from armreach_core.cli import main
+
+    out = tmp_path / "report"
+    command = ["robot", "--urdf", str(slow_arm), "--backends", BACKENDS[0], "--ik-episodes", "1", "--parity-steps", "0"]
+    assert main([*command, "--out", str(out)]) == 0
+    capsys.readouterr()
+    rows = {
+        line.split("|")[1].strip(): line
+        for line in (out / "robot.md").read_text().splitlines()
+        if "| revolute |" in line
+    }
+    assert "| 0.025 (velocity) |" in rows["shoulder_lift_joint"]
+    assert "| 0.05 |" in rows["elbow_joint"] and "(velocity)" not in rows["elbow_joint"]

@@ -34,7 +34,7 @@ def markdown(report: RobotReport) -> str:
     if report.joints:
         lines.append(
             markdown_table(
-                ["joint", "type", "lower", "upper", "effort", "velocity", "home"],
+                ["joint", "type", "lower", "upper", "effort", "velocity", "step", "home"],
                 [
                     [
                         joint["name"],
@@ -43,6 +43,7 @@ def markdown(report: RobotReport) -> str:
                         f"{joint['upper']:.3f}",
                         f"{joint['effort']:.4g}" + ("" if joint.get("effort_given", True) else " (sized)"),
                         f"{joint['velocity']:g}",
+                        _step(joint),
                         f"{home:.3f}",
                     ]
                     for joint, home in zip(report.joints, report.home, strict=False)
@@ -178,3 +179,11 @@ def _lowest(lowest_m: float) -> str:
 
 def _clearance_cm(lowest_m: float) -> str:
     return "no collision geometry" if math.isinf(lowest_m) else f"{lowest_m * 100:.1f} cm"
+
+
+def _step(joint: dict[str, Any]) -> str:
+    """The most a joint moves in one env step, marked where its velocity limit sets it (reports before it: -)."""
+    step = joint.get("step")
+    if step is None:
+        return "-"
+    return f"{step:.4g}" + (" (velocity)" if joint.get("step_from_velocity") else "")

@@ -107,8 +107,10 @@ def _robot_facts(report: RobotReport, env: ArmEnv) -> None:
             "effort": j.effort,
             "effort_given": j.effort_given,
             "velocity": j.velocity,
+            "step": float(step),  # the most it moves in one env step
+            "step_from_velocity": bool(step < env.max_joint_step),  # its velocity limit, not max_joint_step
         }
-        for j in robot.joints
+        for j, step in zip(robot.joints, env.joint_step, strict=True)
     ]
     report.held_joints = [joint.name for joint in robot.held_joints]
     report.anatomy = list(robot.anatomy)
