@@ -261,3 +261,27 @@ def test_wheel_ships_the_gripper_urdf(tmp_path):
     assert "armreach_grasp/assets/ar6_gripper/README.md" in names
     entry_points = archive.read(next(n for n in names if n.endswith("entry_points.txt"))).decode()
     assert "grasp = armreach_grasp.plugin" in entry_points
+
+
+def test_the_fingers_close_no_faster_than_their_velocity_limit() -> None:
+    """The ar6-gripper's fingers are limited to 0.2 m/s: 8.3 mm a step, under ``gripper_step``'s 10 mm."""
+    import warnings
+
+    new = ArmGraspEnv(backend=BACKENDS[0])
+    with warnings.catch_warnings():  # Gymnasium's "out of date" for the older id
+        warnings.simplefilter("ignore", DeprecationWarning)
+        old = gym.make("armreach/Grasp-v1", backend=BACKENDS[0]).unwrapped
+    try:
+        changes = {}
+        for name, env in (("new", new), ("old", old)):
+            env.reset(seed=0)
+            q = env.backend.joint_state()[0]
+            action = np.zeros(env.action_space.shape)
+            action[-1] = -1.0  # close
+            changes[name] = np.abs(env.joint_targets(action, q) - q)[env.task.arm_dof :]
+        speed = new.robot.velocity_limits[new.task.arm_dof :]
+        np.testing.assert_allclose(changes["new"], speed * new.physics.control_dt)
+        np.testing.assert_allclose(changes["old"], old.task.gripper_step)
+    finally:
+        new.close()
+        old.close()
