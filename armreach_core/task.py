@@ -162,7 +162,9 @@ class Task(ABC):
         """Position targets for every actuated joint, from an action already clipped into [-1, 1].
 
         The default moves each joint by ``action * max_joint_step`` from its angle ``q``.
-        The env then checks the targets against the joint limits and clips them into it.
+        The env then keeps each joint's change within its URDF velocity limit times the
+        control period (``joint_velocity_limits``), checks the targets against the joint
+        limits and clips them into it.
         """
         return q + action * max_joint_step
 
