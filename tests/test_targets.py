@@ -20,6 +20,7 @@ from armreach_core.env import ArmEnv
 from armreach_core.robot.home import ground_violations
 from armreach_core.robot.ik import RESTARTS, IKPolicy
 from armreach_core.robot.model import RobotModel
+from tests.conftest import BACKENDS
 
 pybullet = pytest.importorskip("pybullet")
 
@@ -204,5 +205,26 @@ def test_a_target_no_pose_reaches_exactly_is_reached_along_a_path_clear_of_the_g
             if terminated or truncated:
                 break
         assert info["is_success"], info["distance"]
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("side", [-1.0, 1.0])
+def test_the_ik_reference_pulls_a_joint_read_past_its_limit_back_inside(side: float) -> None:
+    """Engines read a joint resting on its limit a hair past it; the reference's target must not stay there.
+
+    Vega's lift reads 35 µm under its lower limit when the arm rests, and an action that left it
+    there ended the episode under the paper's rule (a target outside the limits).
+    """
+    env = ArmEnv(backend=BACKENDS[0], joint_limit_mode="terminate")
+    try:
+        robot = env.robot
+        q = robot.home.copy()
+        q[2] = (robot.upper[2] if side > 0 else robot.lower[2]) + side * 1e-8  # just past the elbow's limit
+        for restarts in (0, RESTARTS):  # damped least squares, and the planned move
+            policy = IKPolicy(robot, env.max_joint_step, joint_step=env.joint_step, restarts=restarts)
+            action = policy.act(q, robot.forward_kinematics(q))  # the target is where the arm is
+            target = q + action.astype(np.float64) * env.max_joint_step
+            assert np.all(target >= robot.lower) and np.all(target <= robot.upper), (restarts, target - q)
     finally:
         env.close()

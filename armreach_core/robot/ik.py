@@ -104,6 +104,11 @@ def solve_with_restarts(
     return best_q, best_d
 
 
+#: How far inside its limits the IK reference keeps every joint's target (rad or m): more than an
+#: action's float32 rounding moves a target (about 3e-9), far less than any joint's motion.
+LIMIT_MARGIN = 1e-7
+
+
 class IKPolicy:
     """A controller that maps the reach env's state to actions with one DLS step per control step.
 
@@ -178,6 +183,19 @@ class IKPolicy:
             if self._goal is not None and far:
                 dq = self._goal - q_arr
                 scale = max(1.0, float(np.max(np.abs(dq) / self.joint_step)))
-                return np.clip(dq / (scale * self.max_joint_step), -1.0, 1.0).astype(np.float32)
+                return self._inside(q_arr, dq / (scale * self.max_joint_step))
         dq = self.gain * dls_step(self.robot, q_arr, goal, self.damping)
-        return np.clip(dq / self.max_joint_step, -1.0, 1.0).astype(np.float32)
+        return self._inside(q_arr, dq / self.max_joint_step)
+
+    def _inside(self, q: FloatArray, action: FloatArray) -> npt.NDArray[np.float32]:
+        """``action`` clipped into [-1, 1], with every joint's target at least :data:`LIMIT_MARGIN` inside its limits.
+
+        An engine reads a joint resting on its limit a hair past it (Vega's lift 35 µm below 0
+        under its own weight, the Kinova's third joint 1e-8 rad); an action that left it there
+        would command a target outside the limits, which the paper's rule counts as a violation
+        and ends the episode on. Such a joint is pulled back inside instead.
+        """
+        margin = np.minimum(LIMIT_MARGIN, (self.robot.upper - self.robot.lower) / 4)
+        step = self.max_joint_step
+        target = np.clip(q + np.clip(action, -1.0, 1.0) * step, self.robot.lower + margin, self.robot.upper - margin)
+        return np.clip((target - q) / step, -1.0, 1.0).astype(np.float32)
