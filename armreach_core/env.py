@@ -34,7 +34,6 @@ JOINT_LIMIT_MODES = ("clip", "terminate")
 #: Largest joint angle (rad or m), joint velocity (rad/s or m/s) or end-effector coordinate
 #: (m) taken as physics rather than a numerical blow-up.
 STATE_LIMIT = 1e6
-#: Action dtypes accepted: numbers that are real (bool, complex, text and objects are refused).
 
 
 class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):

@@ -29,8 +29,9 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     ``Box(-1, 1, (n,), float32)``, one value per actuated joint (n = 6 for the bundled
     arm). The joint position target is ``θ + a · max_joint_step`` (default 0.05 rad), each
     joint's change at most its URDF velocity limit times the control period
-    (``joint_velocity_limits``; ``env.joint_step`` per joint), applied through the backend's position control for ``substeps`` physics steps
-    (default 10 × 1/240 s, so the env runs at 24 Hz). Actions outside [-1, 1] are
+    (``joint_velocity_limits``; ``env.joint_step`` per joint), applied through the backend's
+    position control for ``substeps`` physics steps (default 10 × 1/240 s, so the env runs
+    at 24 Hz). Actions outside [-1, 1] are
     clipped into it; NaN, inf, a wrong shape or a dtype that is not real numbers (bool,
     complex, str, object) raise :class:`~armreach_core.ActionError` and leave the state
     untouched.
@@ -90,8 +91,9 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
 
     The arm, the backend and the physics: see :class:`~armreach_core.env.ArmEnv`
     (``backend``, ``urdf``, ``robot``, ``ee_link``, ``home``, ``render_mode``,
-    ``max_joint_step``, ``joint_velocity_limits``, ``timestep``, ``substeps``, ``max_episode_steps``,
-    ``joint_limit_mode``, ``joint_limit_penalty``, ...). The reach task adds:
+    ``max_joint_step``, ``joint_velocity_limits``, ``timestep``, ``substeps``,
+    ``max_episode_steps``, ``joint_limit_mode``, ``joint_limit_penalty``, ...). The reach task
+    adds:
 
     | argument | default | meaning |
     |---|---|---|
