@@ -237,8 +237,7 @@ def test_scripted_reach_succeeds(seed):
     """The IK policy reaches the target: measured in 12 and 17 steps (seeds 0 and 1)."""
     env = ArmReach6DOFEnv(backend="mujoco")
     obs, info = env.reset(seed=seed)
-    robot = env.unwrapped.robot
-    policy = IKPolicy(robot, env.unwrapped.max_joint_step, joint_step=env.unwrapped.joint_step)
+    policy = IKPolicy.for_env(env.unwrapped)
     for _ in range(40):
         obs, _, terminated, _, info = env.step(policy.act(obs[:6], obs[9:12]))
         if terminated:

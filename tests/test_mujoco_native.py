@@ -46,7 +46,7 @@ def test_reaches_a_target_on_a_corpus_arm(arm: str, seed: int) -> None:
     try:
         assert env.backend.model.nu >= env.robot.dof  # type: ignore[attr-defined]
         env.reset(seed=seed)
-        policy = IKPolicy(env.robot, env.max_joint_step, joint_step=env.joint_step, restarts=RESTARTS)
+        policy = IKPolicy.for_env(env, restarts=RESTARTS)
         target = env.task.target  # type: ignore[attr-defined]
         for _ in range(60):
             _, _, terminated, _, info = env.step(policy.act(env.backend.joint_state()[0], target))

@@ -121,7 +121,7 @@ def test_weak_arm_ik_reference_reaches_its_targets_in_episodes():
     try:
         for seed in range(12):
             env.reset(seed=10_000 + seed)
-            policy = IKPolicy(env.robot, env.max_joint_step, joint_step=env.joint_step, restarts=RESTARTS)
+            policy = IKPolicy.for_env(env, restarts=RESTARTS)
             for _ in range(400):
                 _, _, terminated, truncated, info = env.step(policy.act(env.backend.read_state().q, env.task.target))
                 if terminated or truncated:

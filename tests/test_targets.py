@@ -167,7 +167,7 @@ def test_the_ik_reference_reaches_nearly_every_target_on_every_corpus_arm(arm: A
     try:
         for seed in IK_SEEDS:
             env.reset(seed=seed)
-            policy = IKPolicy(env.robot, env.max_joint_step, joint_step=env.joint_step, restarts=RESTARTS)
+            policy = IKPolicy.for_env(env, restarts=RESTARTS)
             target: Any = env.task.target  # type: ignore[attr-defined]
             while True:
                 _, _, terminated, truncated, info = env.step(policy.act(env.backend.joint_state()[0], target))
@@ -193,7 +193,7 @@ def test_a_target_no_pose_reaches_exactly_is_reached_along_a_path_clear_of_the_g
     try:
         env.reset(seed=0)
         env.task.target = target  # type: ignore[attr-defined]
-        policy = IKPolicy(env.robot, env.max_joint_step, joint_step=env.joint_step, restarts=RESTARTS)
+        policy = IKPolicy.for_env(env, restarts=RESTARTS)
         start = env.backend.joint_state()[0]
         policy.act(start, target)
         goal = policy._goal
@@ -222,7 +222,7 @@ def test_the_ik_reference_pulls_a_joint_read_past_its_limit_back_inside(side: fl
         q = robot.home.copy()
         q[2] = (robot.upper[2] if side > 0 else robot.lower[2]) + side * 1e-8  # just past the elbow's limit
         for restarts in (0, RESTARTS):  # damped least squares, and the planned move
-            policy = IKPolicy(robot, env.max_joint_step, joint_step=env.joint_step, restarts=restarts)
+            policy = IKPolicy.for_env(env, restarts=restarts)
             action = policy.act(q, robot.forward_kinematics(q))  # the target is where the arm is
             target = q + action.astype(np.float64) * env.max_joint_step
             assert np.all(target >= robot.lower) and np.all(target <= robot.upper), (restarts, target - q)

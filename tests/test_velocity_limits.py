@@ -81,7 +81,7 @@ def test_the_ik_reference_plans_within_each_joints_speed(slow_arm: Path) -> None
         from armreach_core.robot.ik import RESTARTS, IKPolicy
 
         env.reset(seed=3)
-        policy = IKPolicy(env.robot, env.max_joint_step, joint_step=env.joint_step, restarts=RESTARTS)
+        policy = IKPolicy.for_env(env, restarts=RESTARTS)
         q = env.backend.joint_state()[0]
         change = env.joint_targets(policy.act(q, env.task.target).astype(np.float64), q) - q  # type: ignore[attr-defined]
         assert np.all(np.abs(change) <= env.joint_step + 1e-12)

@@ -102,7 +102,7 @@ def drive(env: ArmEnv, sequence: str, steps: int, seed: int) -> Trajectory:
     env.reset(seed=seed)
     rng = np.random.default_rng(seed)
     robot, backend = env.robot, env.backend
-    policy = IKPolicy(robot, env.max_joint_step, joint_step=env.joint_step)
+    policy = IKPolicy.for_env(env)
     home_ee = robot.forward_kinematics(robot.home)
     goal = task.target if sequence == "scripted" else np.array([home_ee[0], home_ee[1], -PRESS_DEPTH])
     path = np.asarray(goal, dtype=np.float64) - home_ee

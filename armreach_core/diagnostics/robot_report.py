@@ -152,7 +152,7 @@ def _ik(env: ArmEnv, episodes: int, seed: int) -> tuple[float, float]:
     successes, steps = 0, []
     for i in range(episodes):
         env.reset(seed=seed + i)
-        policy = IKPolicy(env.robot, env.max_joint_step, joint_step=env.joint_step, restarts=RESTARTS)
+        policy = IKPolicy.for_env(env, restarts=RESTARTS)
         target = env.task.target  # type: ignore[attr-defined]
         for step in range(1, 400):
             q = env.backend.read_state().q

@@ -70,7 +70,7 @@ def rollout(
             raise ConfigError(f"task {task!r} has no reference controller; use --policy ik or random")
         obs, info = env.reset(seed=seed)
         env.action_space.seed(seed)
-        ik = IKPolicy(env.robot, env.max_joint_step, joint_step=env.joint_step, restarts=RESTARTS)
+        ik = IKPolicy.for_env(env, restarts=RESTARTS)
         touches = 0
         frames = [env.backend.render(env.camera)]
         steps, total = 0, 0.0

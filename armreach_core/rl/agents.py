@@ -226,9 +226,7 @@ class IKAgent:
 
     def act(self, obs: Any, env: ArmEnv) -> npt.NDArray[np.float32]:
         if self._policy is None or self._policy.robot is not env.robot:
-            self._policy = IKPolicy(
-                env.robot, env.max_joint_step, joint_step=env.joint_step, damping=self.damping, restarts=RESTARTS
-            )
+            self._policy = IKPolicy.for_env(env, damping=self.damping, restarts=RESTARTS)
         target = getattr(env.task, "target", None)
         if target is None:
             raise ConfigError(f"the IK controller needs a task with a target position; {env.task_name!r} has none")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -104,6 +105,19 @@ def solve_with_restarts(
     return best_q, best_d
 
 
+class Stepping(Protocol):
+    """What :meth:`IKPolicy.for_env` reads from an env: the arm and how far an action moves each joint."""
+
+    @property
+    def robot(self) -> RobotModel: ...
+
+    @property
+    def max_joint_step(self) -> float: ...
+
+    @property
+    def joint_step(self) -> FloatArray: ...
+
+
 #: How far inside its limits the IK reference keeps every joint's target (rad or m): more than an
 #: action's float32 rounding moves a target (about 3e-9), far less than any joint's motion.
 LIMIT_MARGIN = 1e-7
@@ -155,6 +169,11 @@ class IKPolicy:
         self.near = near
         self._target: FloatArray | None = None
         self._goal: FloatArray | None = None
+
+    @classmethod
+    def for_env(cls, env: Stepping, **options: Any) -> IKPolicy:
+        """The policy for ``env``'s arm and action: its ``max_joint_step`` and per-joint ``joint_step``."""
+        return cls(env.robot, env.max_joint_step, joint_step=env.joint_step, **options)
 
     def _feasible(self, start: FloatArray, goal: FloatArray) -> bool:
         """A solution reached along a line the motors hold, every link above the ground all the way

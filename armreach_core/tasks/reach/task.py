@@ -306,9 +306,7 @@ class _IKDemonstrator:
     def reset(self) -> None:
         from armreach_core.robot.ik import RESTARTS, IKPolicy
 
-        self.policy = IKPolicy(
-            self.task.robot, float(self.env.max_joint_step), restarts=RESTARTS, joint_step=self.env.joint_step
-        )
+        self.policy = IKPolicy.for_env(self.env, restarts=RESTARTS)
 
     def act(self, observation: Any) -> npt.NDArray[np.float32]:
         return self.policy.act(self.env.backend.joint_state()[0], self.task.target)
