@@ -141,13 +141,11 @@ IK_SEEDS = range(30_000, 30_100)
 
 
 #: Corpus arms on which the IK reference misses more than 1 % of these targets, not run here: each
-#: takes many minutes of failed 400-step episodes. IRB140 misses 12 of 100: rtb-data's description
-#: has meshes reaching 3.2-3.5 m from links whose joints span 2.2 m (its collision geometry is off
-#: its kinematics, which `armreach robot` reports), and the arm stops where those meshes collide
-#: with each other. Vega's left arm reaches every one since its lift's sized motor carries its
-#: bare frames (77 of 100 missed before); KR210 since its motors hold it and its reachability map
-#: is dense enough to draw targets from.
-IK_SHORT = {"abb-irb140"}
+#: takes many minutes of failed 400-step episodes. None now: the IRB140 missed 12 of 100 while its
+#: meshes that lie off its kinematics collided (tests/test_heavy_arms.py); Vega's left arm reaches
+#: every one since its lift's sized motor carries its bare frames (77 of 100 missed before); KR210
+#: since its motors hold it and its reachability map is dense enough to draw targets from.
+IK_SHORT: set[str] = set()
 
 
 def _ik_param(arm: Any) -> Any:

@@ -74,14 +74,10 @@ def _shape_points(geometry: Any) -> FloatArray | None:
 
 
 @functools.lru_cache(maxsize=32)
-def _geometry(robot: ArmKinematics) -> _Geometry:
-    """The robot's links' collision points, which may touch the ground, and which may touch each other."""
-    urdf = robot.parsed.model.robot
-    links = [str(link.name) for link in urdf.links]
-    base = robot.root_link
-    order = robot.tree_joints
+def _link_points(robot: ArmKinematics) -> dict[str, FloatArray]:
+    """Every link's collision points in its own frame, as the URDF gives them (links with collision geometry only)."""
     points: dict[str, FloatArray] = {}
-    for link in urdf.links:
+    for link in robot.parsed.model.robot.links:
         clouds = []
         for collision in link.collisions:
             local = _shape_points(collision.geometry)
@@ -91,6 +87,19 @@ def _geometry(robot: ArmKinematics) -> _Geometry:
             clouds.append(local @ transform[:3, :3].T + transform[:3, 3])
         if clouds:
             points[str(link.name)] = np.vstack(clouds)
+    return points
+
+
+@functools.lru_cache(maxsize=32)
+def _geometry(robot: ArmKinematics) -> _Geometry:
+    """The robot's links' collision points, which may touch the ground, and which may touch each other.
+    Geometry off the kinematics (:func:`misplaced_geometry`) is left out, as the engines leave it out."""
+    urdf = robot.parsed.model.robot
+    links = [str(link.name) for link in urdf.links]
+    base = robot.root_link
+    order = robot.tree_joints
+    far, _ = misplaced_geometry(robot)
+    points = {link: cloud for link, cloud in _link_points(robot).items() if link not in far}
     # Rigid groups: links joined by fixed joints move as one body.
     group = {name: name for name in links}
     for joint in order:
@@ -159,11 +168,13 @@ def misplaced_geometry(robot: ArmKinematics) -> tuple[dict[str, float], float]:
 
     No part of a robot lies farther from a link than that, so such geometry is in another unit
     or frame than the kinematics (meshes exported in other units, or placed where the whole
-    robot stands instead of in the link's frame); the engines would collide with it as given.
+    robot stands instead of in the link's frame): colliding with it would stop the arm against
+    things it does not touch. It is left out of every collision check here and in the engines
+    (:func:`armreach_core.robot.hulls.simulation_urdf`).
     """
     span = sum(float(np.linalg.norm(joint.origin[:3, 3])) for joint in robot.tree_joints)
     far = {}
-    for link, points in _geometry(robot).points.items():
+    for link, points in _link_points(robot).items():
         reach = float(np.linalg.norm(points, axis=1).max())
         if reach > span + 0.05:  # a link's own size beyond its last joint (a flange, a tool): a few cm
             far[link] = reach

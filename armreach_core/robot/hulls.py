@@ -135,11 +135,16 @@ def simulation_urdf(robot: RobotModel, *, visuals: bool) -> bytes:
     """The robot's resolved URDF with collision meshes replaced by their hulls and, unless
     ``visuals``, without ``<visual>`` elements (an env that never renders needs none), and
     with inertias no rigid body has repaired and frames (links without ``<inertial>`` fixed to
-    another) massless (:mod:`armreach_core.robot.inertia`).
+    another) massless (:mod:`armreach_core.robot.inertia`), and without the collision geometry
+    of links whose geometry is off the kinematics (``robot.uncollided_links``).
     :func:`armreach_core.robot.meshes.readable` then converts the meshes an engine cannot read."""
     root = etree.fromstring(robot.parsed.resolved_xml)
     repair_inertials(root)
     massless_frames(root)
+    for link in root.iter("link"):
+        if link.get("name") in robot.uncollided_links:
+            for collision in link.findall("collision"):
+                link.remove(collision)
     for collision in root.iter("collision"):
         for mesh in collision.iter("mesh"):
             filename = mesh.get("filename", "")

@@ -100,8 +100,10 @@ class RobotModel(ArmKinematics):
         self.home: FloatArray = q
         self._sealed = True
 
-    #: What the description's geometry gets wrong that the engines simulate as given (one sentence each).
+    #: What the description's geometry gets wrong (one sentence each).
     geometry_warnings: tuple[str, ...] = ()
+    #: Links whose collision geometry is off the kinematics: no engine or check collides with it.
+    uncollided_links: frozenset[str] = frozenset()
 
     def _report_misplaced_geometry(self) -> None:
         from armreach_core.robot.geometry import misplaced_geometry
@@ -112,12 +114,13 @@ class RobotModel(ArmKinematics):
             note = (
                 f"collision geometry off the kinematics: {links} from its own frame, beyond the {span:.2f} m that "
                 f"all the joints of {self.name!r} span; its meshes are in another unit or frame than its joints "
-                "(check each <mesh scale=...> and where the mesh was exported), and the engines collide with them as "
-                "given"
+                "(check each <mesh scale=...> and where the mesh was exported); left out of collisions on both "
+                "engines, so these links touch nothing"
             )
             log.warning("%s", note)
             self.anatomy = (*self.anatomy, note)
             self.geometry_warnings = (note,)
+            self.uncollided_links = frozenset(far)
 
     def _build(
         self,
