@@ -59,6 +59,25 @@ class Component:
     description: str
 
 
+@dataclass(frozen=True)
+class Scaling:
+    """An affine map of a flat observation into the units a network learns best from: ``(x - shift) / scale``."""
+
+    shift: FloatArray
+    scale: FloatArray
+
+    def apply(self, flat: FloatArray) -> npt.NDArray[np.float32]:
+        """``flat`` (float64, in SI units) scaled, as float32."""
+        scaled: npt.NDArray[np.float32] = ((flat - self.shift) / self.scale).astype(np.float32)
+        return scaled
+
+    def box(self, box: spaces.Box) -> spaces.Box:
+        """The space of the scaled observation of a value in ``box``."""
+        low = self.apply(np.asarray(box.low, dtype=np.float64))
+        high = self.apply(np.asarray(box.high, dtype=np.float64))
+        return spaces.Box(low, high, dtype=np.float32)
+
+
 class ObservationLayout:
     """The one declaration of a flat observation: slices, bounds and the documentation table.
 
@@ -96,6 +115,18 @@ class ObservationLayout:
         """An observation's blocks by component name (float64 copies)."""
         values = np.asarray(flat, dtype=np.float64)
         return {name: values[part].copy() for name, part in self.slices.items()}
+
+    def scaling(self, units: dict[str, tuple[npt.ArrayLike, npt.ArrayLike]]) -> Scaling:
+        """The :class:`Scaling` that maps each component ``name`` by ``units[name] = (shift, scale)``
+        (each a number or one value per element; a component not named is left as it is)."""
+        shift, scale = np.zeros(self.size), np.ones(self.size)
+        for name, (offset, unit) in units.items():
+            part = self.slices[name]
+            shift[part] = offset
+            scale[part] = unit
+        if not np.all(scale > 0):
+            raise ValueError(f"observation scales must be positive: {scale.tolist()}")
+        return Scaling(shift, scale)
 
     def table(self, indent: str = "    ") -> str:
         """The markdown table of the docstrings: index, component, unit, bounds, notes."""
@@ -146,6 +177,9 @@ class Task(ABC):
 
     #: Short name, as registered.
     name: ClassVar[str]
+    #: How the task scales its flat observation from SI units (``None``: it does not). An exported
+    #: policy folds it into its first layer, so that a robot feeds it SI units (armreach export).
+    observation_scaling: Scaling | None = None
 
     def __init__(self, robot: RobotModel) -> None:
         self.robot = robot

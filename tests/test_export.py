@@ -69,3 +69,40 @@ def _has(module: str) -> bool:
 def test_the_runtime_refuses_a_folder_without_a_card_or_a_wrong_observation(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="no card.json"):
         PolicyRuntime(tmp_path)
+
+
+def test_a_policy_trained_on_scaled_observations_is_exported_for_si_ones(
+    tmp_path: Path, trained_run: Callable[..., TrainedRun]
+) -> None:
+    """``scaled_observation`` is kept by evaluation, and the export folds the scaling into the first
+    layer: a robot feeds the card's SI observation and gets the action the model gave the scaled one."""
+    from armreach_core.rl import runs
+    from armreach_core.rl.agents import env_kwargs
+    from armreach_core.rl.evaluate import load_agent
+    from tests.conftest import TINY
+
+    preset = tmp_path / "scaled.yaml"
+    scaled_env_section = "env: {max_episode_steps: 64, scaled_observation: true}"
+    preset.write_text(TINY.replace("env: {max_episode_steps: 64}", scaled_env_section))
+    run = trained_run("--preset", str(preset), "--algo", "td3", "--seed", "3")
+    out = tmp_path / "export"
+    assert main(["export", str(run.path), "--out", str(out)]) == 0
+    card = json.loads((out / "card.json").read_text())
+    assert "scaled_observation is folded into the first layer" in card["observation"]["scaling"]
+    config = runs.read_config(run.path)
+    kwargs = env_kwargs(config, evaluation=True)
+    assert kwargs["scaled_observation"] is True
+    agent = load_agent(run.path, config)
+    scaled_env, si_env = ArmEnv(**kwargs), ArmEnv(**{**kwargs, "scaled_observation": False})
+    runtime = PolicyRuntime(out)
+    try:
+        scaled, si = scaled_env.reset(seed=5)[0], si_env.reset(seed=5)[0]
+        for _ in range(30):
+            action = agent.act(scaled, scaled_env)
+            assert not np.allclose(agent.act(si, si_env), action, atol=1e-3)  # the scaling matters
+            np.testing.assert_allclose(runtime.act(si), action, atol=1e-5, rtol=0)
+            scaled, *_ = scaled_env.step(action)
+            si, *_ = si_env.step(action)
+    finally:
+        scaled_env.close()
+        si_env.close()

@@ -35,6 +35,8 @@ class Agent(Protocol):
 
 #: Env settings evaluation keeps from training: they define what an action means.
 ACTION_SETTINGS = ("max_joint_step", "substeps", "joint_velocity_limits")
+#: Task options evaluation keeps from training: they define the observation the policy reads.
+OBSERVATION_SETTINGS = ("scaled_observation",)
 #: The arm itself (where it starts and sits, where its ROS packages are, its xacro arguments):
 #: kept by evaluation like the action's meaning.
 PLACEMENT_SETTINGS = tuple(key for key in ARM_KEYS if key not in ("urdf", "ee_link", "robot"))
@@ -45,13 +47,15 @@ def env_kwargs(config: RunConfig, *, backend: str | None = None, evaluation: boo
 
     ``evaluation`` gives the paper's task whatever training used: the 2048-step limit
     (``eval_max_episode_steps``), joint-limit violations ending the episode, the 5 cm
-    success radius and the paper's reward; only the action's meaning is kept.
+    success radius and the paper's reward; only the action's meaning and the observation's
+    units are kept.
     """
     kwargs = config.env_settings
     kwargs.setdefault("joint_velocity_limits", False)  # a run recorded before the env honoured them
     kwargs.pop("randomize", None)  # a wrapper, not an env argument: see make_vec_env
     if evaluation:
-        kwargs = {k: v for k, v in kwargs.items() if k in ACTION_SETTINGS + PLACEMENT_SETTINGS}
+        kept = ACTION_SETTINGS + OBSERVATION_SETTINGS + PLACEMENT_SETTINGS
+        kwargs = {k: v for k, v in kwargs.items() if k in kept}
         kwargs["max_episode_steps"] = config.eval_max_episode_steps
         kwargs["joint_limit_mode"] = "terminate"
     kwargs.update(task=config.task, backend=backend or config.backend)

@@ -24,6 +24,7 @@ from armreach_core.rl.evaluate import load_agent
 from armreach_core.sim2real.export import (
     CARD_FORMAT,
     CARD_VERSION,
+    fold_scaling,
     observation_keys,
     policy_layers,
     save_card,
@@ -51,6 +52,7 @@ def policy_card(env: ArmEnv, algo: str, learner: str, keys: list[str] | None, ru
         if layout is not None
         else []
     )
+    scaled = getattr(env.task, "observation_scaling", None) is not None
     space: Any = env.observation_space
     shapes = [s.shape for s in space.spaces.values()] if keys else [space.shape]
     size = int(sum(int(np.prod(shape or ())) for shape in shapes))
@@ -66,7 +68,8 @@ def policy_card(env: ArmEnv, algo: str, learner: str, keys: list[str] | None, ru
             "size": size,
             "keys": keys,
             "components": components,
-            "scaling": "none: each component is clipped into [low, high] and fed as is (float32)",
+            "scaling": "none: each component is clipped into [low, high] and fed as is (float32)"
+            + ("; the run's scaled_observation is folded into the first layer" if scaled else ""),
         },
         "action": {
             "size": int(env.action_space.shape[0]),  # type: ignore[index]
@@ -105,6 +108,12 @@ def export_run(run_dir: str | os.PathLike[str], out: str | os.PathLike[str], *, 
     env = ArmEnv(**kwargs)
     try:
         card = policy_card(env, config.algo, config.learner, keys, str(run_path))
+        scaling = env.task.observation_scaling
+        if scaling is not None:  # the card's observation is in SI units
+            spaces: Any = getattr(env.observation_space, "spaces", {})
+            before = keys[: keys.index("observation")] if keys else []
+            offset = sum(int(np.prod(spaces[k].shape)) for k in before)
+            layers = fold_scaling(layers, scaling.shift, scaling.scale, offset)
     finally:
         env.close()
     folder.mkdir(parents=True, exist_ok=True)

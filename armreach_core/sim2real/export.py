@@ -105,6 +105,19 @@ def _sbx_layers(model: Any, algo: str) -> tuple[list[Layer], str]:
     raise ConfigError(f"cannot export an SBX {algo} policy; exported are DDPG, TD3 and SAC")
 
 
+def fold_scaling(layers: Sequence[Layer], shift: npt.ArrayLike, scale: npt.ArrayLike, offset: int = 0) -> list[Layer]:
+    """``layers`` taking the inputs from ``offset`` on in SI units: the scaling ``(x - shift) / scale``
+    the policy was trained behind (a task's ``observation_scaling``) folded into the first layer."""
+    first = layers[0]
+    shift64, scale64 = np.asarray(shift, dtype=np.float64), np.asarray(scale, dtype=np.float64)
+    part = slice(offset, offset + len(scale64))
+    weight = first.weight.astype(np.float64)
+    folded = weight[:, part] / scale64
+    bias = first.bias.astype(np.float64) - folded @ shift64
+    weight[:, part] = folded
+    return [Layer(weight.astype(np.float32), bias.astype(np.float32), first.activation), *layers[1:]]
+
+
 def observation_keys(space: Any) -> list[str] | None:
     """The keys of a Dict observation in the order the policy concatenates them; None for a flat one."""
     spaces = getattr(space, "spaces", None)

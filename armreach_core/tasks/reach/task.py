@@ -34,6 +34,7 @@ from armreach_core.task import (
     Demonstrator,
     GoalArray,
     ObservationLayout,
+    Scaling,
     Scene,
     Score,
     Task,
@@ -55,6 +56,8 @@ JOINTS, EE, TARGET, VELOCITIES, DELTA = (
 )
 
 
+#: The least scale (rad, m, rad/s) an observed value is divided by under ``scaled_observation``.
+MIN_SCALE = 1e-3
 #: The default target ball's radius as a fraction of the arm's reach (its centre is at half the reach,
 #: forward and up): the bundled arm registers the paper's 0.5 m, 0.48 of its reach.
 TARGET_RADIUS_FRACTION = 0.5
@@ -84,6 +87,12 @@ class ReachTask(Task):
             the arm; default True (``False``: the ``Reach-v0`` targets, which may touch the arm).
         goal_conditioned: return a Dict observation (observation / achieved_goal /
             desired_goal) for HER, default False.
+        scaled_observation: give the observation in the arm's own units rather than SI
+            (:attr:`observation_scaling`): joint angles about the middle of their range over half
+            of it, the end effector's and the target's positions about the target ball's centre
+            and the end effector to the target over the ball's radius, joint velocities over the
+            URDF velocity limits; default False. A network then sees a 3 m arm's task in the
+            numbers it sees a 50 cm arm's in (the ``any-arm`` preset).
     """
 
     name = "reach"
@@ -100,6 +109,7 @@ class ReachTask(Task):
         min_target_height: float = 0.05,
         targets_clear_of_arm: bool = True,
         goal_conditioned: bool = False,
+        scaled_observation: bool = False,
     ) -> None:
         super().__init__(robot)
         if not (np.isfinite(success_threshold) and success_threshold > 0):
@@ -139,6 +149,8 @@ class ReachTask(Task):
                     f"inside the arm's reach (about {self.sampler.map.reach:.2f} m) or enlarge target_radius"
                 )
         self.layout = ObservationLayout(self._components(self.sampler.map.reach))
+        if scaled_observation:
+            self.observation_scaling = self._scaling()
         # The flat observation, filled in place through views of its parts, and clipped
         # into its float64 bounds before the float32 cast.
         self._flat = np.zeros(self.layout.size)
@@ -183,8 +195,21 @@ class ReachTask(Task):
             return [joint, qd]
         return [joint, ee, target, qd, delta]
 
+    def _scaling(self) -> Scaling:
+        robot, center, radius = self.robot, self.sampler.center, self.sampler.radius
+        units: dict[str, tuple[npt.ArrayLike, npt.ArrayLike]] = {
+            JOINTS: ((robot.lower + robot.upper) / 2, np.maximum((robot.upper - robot.lower) / 2, MIN_SCALE)),
+            EE: (center, radius),
+            TARGET: (center, radius),
+            VELOCITIES: (0.0, np.maximum(robot.velocity_limits, MIN_SCALE)),
+            DELTA: (0.0, radius),
+        }
+        return self.layout.scaling({name: unit for name, unit in units.items() if name in self.layout.slices})
+
     def observation_space(self) -> spaces.Space[Any]:
         flat = self.layout.box()
+        if self.observation_scaling is not None:
+            flat = self.observation_scaling.box(flat)
         if not self.goal_conditioned:
             return flat
         base = np.asarray(self.robot.base_position, dtype=np.float32)
@@ -215,7 +240,9 @@ class ReachTask(Task):
             views[EE][...] = state.ee_pos
             np.subtract(self._target, state.ee_pos, out=views[DELTA])
         np.maximum(flat, layout.low, out=flat)
-        observation = np.minimum(flat, layout.high, out=flat).astype(np.float32)
+        np.minimum(flat, layout.high, out=flat)
+        scaling = self.observation_scaling
+        observation = flat.astype(np.float32) if scaling is None else scaling.apply(flat)
         if not self.goal_conditioned:
             return observation
         return {
