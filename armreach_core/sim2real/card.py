@@ -52,7 +52,7 @@ def policy_card(env: ArmEnv, algo: str, learner: str, keys: list[str] | None, ru
         if layout is not None
         else []
     )
-    scaled = getattr(env.task, "observation_scaling", None) is not None
+    scaled = env.task.observation_scaling is not None
     space: Any = env.observation_space
     shapes = [s.shape for s in space.spaces.values()] if keys else [space.shape]
     size = int(sum(int(np.prod(shape or ())) for shape in shapes))
