@@ -105,6 +105,7 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     | ``min_target_height`` | 0.05 | lowest target height (m) |
     | ``targets_clear_of_arm`` | ``True`` | targets keep ``success_threshold`` from the arm's links at home |
     | ``goal_conditioned`` | ``False`` | a ``Dict`` observation for HER |
+    | ``scaled_observation`` | ``False`` | the observation in the arm's own units (joint ranges, target ball, velocity limits) |
 
     ## Version history
 
