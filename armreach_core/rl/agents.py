@@ -190,6 +190,10 @@ def build_model(
                 "n_sampled_goal": her.get("n_sampled_goal", 4),
                 "goal_selection_strategy": her.get("goal_selection_strategy", "future"),
             }
+        if learner == "sbx" and "replay_buffer_class" not in kwargs:  # samples as numpy (rl.lean_buffer)
+            from armreach_core.rl.lean_buffer import NumpyReplayBuffer
+
+            kwargs["replay_buffer_class"] = NumpyReplayBuffer
         policy_name = "MultiInputPolicy" if her is not None else "MlpPolicy"
     with warnings.catch_warnings():
         # The paper's PPO batch (300) does not divide its rollout (2048); SB3 warns and
