@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import re
 import shutil
@@ -98,3 +99,24 @@ def test_a_shadowing_source_tree_names_the_failed_plugin(tmp_path):
     assert "plugin 'armreach' (distribution 'armreach') failed" in message  # the plugin and why
     assert "armreach_core.assets" in message
     assert "shadows" in message and str(tmp_path) in message
+
+
+def test_precompile_writes_the_bytecode_a_python_without_a_cache_would_compile_every_time(tmp_path):
+    """Where PYTHONDONTWRITEBYTECODE is set nothing writes .pyc files; ``make install``'s precompile
+    step does, once, for what the commands import (and the modules it is given)."""
+    (tmp_path / "cached_by_precompile.py").write_text("VALUE = 1\n")
+    pyc = Path(importlib.util.cache_from_source(str(tmp_path / "cached_by_precompile.py")))
+    env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1", "PYTHONPATH": str(tmp_path), "PYTHONWARNINGS": "ignore"}
+
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, *args], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+
+    train = Path(importlib.util.cache_from_source(str(ROOT / "armreach_core" / "rl" / "train.py")))
+    train.unlink(missing_ok=True)
+    assert run("-c", "import cached_by_precompile").returncode == 0
+    assert not pyc.exists()  # what every command met: compiled in memory, never written
+    done = run("-m", "armreach_core.cli.precompile", "cached_by_precompile", "no_such_module_here")
+    assert done.returncode == 0, done.stderr
+    assert pyc.exists()
+    assert "not installed, so not compiled: no_such_module_here" in done.stdout
+    assert train.exists()  # what the commands import, written again
