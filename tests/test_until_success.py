@@ -303,3 +303,44 @@ def test_sb3_and_sbx_policies_are_copied_to_a_worker_by_what_holds_their_paramet
         assert np.array_equal(sac.policy.predict(obs, deterministic=True)[0], before)
     finally:
         env.close()
+
+
+@pytest.mark.training
+@pytest.mark.parametrize("background", [False, True])
+def test_a_run_that_never_passes_ends_with_the_policy_of_its_best_evaluation(tmp_path: Path, background: bool) -> None:
+    """Training to the step budget without a pass evaluates the final policy too, and the model
+    ends with the policy that did best: evaluated again, it scores the best row's successes. An
+    earlier policy wins only when it did strictly better than the final one."""
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from armreach_core.rl.learners import algo_class
+    from armreach_core.rl.stop_on_success import StopOnSuccessCallback
+    from armreach_core.rl.validation import BATCH, evaluation_envs
+
+    train_env = functools.partial(ArmEnv, backend="pybullet", max_episode_steps=50, distance_exponent=1.0)
+    venv = make_vec_env(train_env, n_envs=2, seed=0)
+    model = algo_class("ppo", "sb3")("MlpPolicy", venv, n_steps=64, batch_size=64, n_epochs=2, seed=0, device="cpu")
+    # every evaluation decided at its first failure; passing needs 40 successes in a row
+    spec = UntilSuccess(threshold=1.0, episodes=40, every=100, gate=1.0, background=background)
+    easy = functools.partial(ArmEnv, backend="pybullet", success_threshold=0.3, max_episode_steps=60)
+    callback = StopOnSuccessCallback(spec, easy, tmp_path, time.perf_counter)
+    try:
+        model.learn(3000, callback=callback)  # PPO ends its last rollout at 3,072
+        callback.finish()
+        kept = callback.keep_best()
+    finally:
+        callback.close()
+        venv.close()
+    rows = read_validations(tmp_path)
+    assert callback.passed is None and not any(row["passed"] for row in rows)
+    assert rows[-1]["timesteps"] == 3072 and rows[-2]["timesteps"] < 3072  # the final policy, evaluated
+    final, earlier = rows[-1]["successes"], [row["successes"] for row in rows[:-1]]
+    assert final < max(earlier)  # this seed's final policy did worse than an earlier one
+    assert kept == rows[earlier.index(max(earlier))]["timesteps"] == model.num_timesteps
+    envs = [easy() for _ in range(evaluation_envs(spec))]
+    try:
+        again = validate(lambda obs: model.predict(obs, deterministic=True)[0], envs, spec, lanes=BATCH)
+    finally:
+        for env in envs:
+            env.close()
+    assert again.successes == max(earlier)

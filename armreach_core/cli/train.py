@@ -168,6 +168,9 @@ def run(args: argparse.Namespace) -> int:
                 f"at {result.timesteps:,} steps",
             )
         ]
+    if result.kept is not None:
+        best = f"the policy of step {result.kept:,}, the best of the held-out evaluations (validation.csv)"
+        stopped = [("kept", best)]
     print(
         table(
             [

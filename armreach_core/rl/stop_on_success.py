@@ -12,6 +12,14 @@ parameters that the same evaluation run in the training process would have stopp
 same bit for bit, having spent less time. Training past that point (a second or two) is not
 kept: ``checkpoint.json`` and ``validation.csv`` give the evaluated step, ``train_seconds``
 the time the answer came.
+
+A run that reaches its step budget without passing ends with the best policy its
+evaluations saw: the final policy is evaluated too (a last row of ``validation.csv``), and
+when an earlier evaluation's policy did better (more successes before the failure that
+decided it), :meth:`StopOnSuccessCallback.keep_best` gives the model that policy's
+parameters and step count back for ``model.zip``, like SB3's ``EvalCallback`` keeping its
+best model. The checkpoint keeps where training got to, so that a resumed run goes on from
+there.
 """
 
 from __future__ import annotations
@@ -61,6 +69,10 @@ class StopOnSuccessCallback(BaseCallback):
         #: The step counts and parameters (:func:`~armreach_core.rl.background.snapshot`) of the
         #: evaluations the worker has not answered yet.
         self.asked: list[tuple[int, Any]] = []
+        #: The best evaluation that did not pass: its successes, step count and parameters.
+        self.best: tuple[int, int, Any] | None = None
+        #: The step count of the last evaluation recorded.
+        self.judged = -1
 
     def _on_training_start(self) -> None:
         self.last = int(self.model.num_timesteps)
@@ -84,6 +96,17 @@ class StopOnSuccessCallback(BaseCallback):
             self.worker.submit(self.model.policy, for_worker(self.model.policy, taken))
             self.seconds += self.train_seconds() - t0
             return True
+        result = self._validate_here()
+        self._record(steps, result)
+        if result.passed:
+            self.passed = result
+            return False
+        if self._better(result):
+            self.best = (result.successes, steps, snapshot(self.model.policy))
+        return True
+
+    def _validate_here(self) -> Validation:
+        """Evaluate the model's policy in this process."""
         if not self.envs:
             self.envs = [self.make_env() for _ in range(evaluation_envs(self.spec))]
         model = self.model
@@ -93,11 +116,12 @@ class StopOnSuccessCallback(BaseCallback):
 
         result = validate(policy, self.envs, self.spec, lanes=BATCH)
         self.seconds += result.seconds
-        self._record(steps, result)
-        if result.passed:
-            self.passed = result
-            return False
-        return True
+        return result
+
+    def _better(self, result: Validation) -> bool:
+        """Whether a failed evaluation did better than the best so far: more successes before the
+        failure that decided it (every failed evaluation stops at the same number of failures)."""
+        return self.best is None or result.successes > self.best[0]
 
     def _answer(self) -> bool:
         """Read the worker's oldest answer (waiting for it) and record it; True when it passed,
@@ -109,6 +133,8 @@ class StopOnSuccessCallback(BaseCallback):
         steps, params = self.asked.pop(0)
         self._record(steps, result)
         if not result.passed:
+            if self._better(result):
+                self.best = (result.successes, steps, params)
             return False
         self.passed = result
         restore(self.model.policy, params)
@@ -120,13 +146,44 @@ class StopOnSuccessCallback(BaseCallback):
         False, as when a signal stopped training), then stop the worker."""
         while wait and self.passed is None and self.asked:
             self._answer()
+        if wait and self.passed is None and self.best is not None and self.judged != int(self.model.num_timesteps):
+            self._judge_final()
         self.close()
+
+    def _judge_final(self) -> None:
+        """Evaluate the policy training ended with, against the best earlier one: it may pass, or
+        stand as the best (the earlier one is then dropped)."""
+        steps = int(self.model.num_timesteps)
+        if self.worker is not None:
+            t0 = self.train_seconds()
+            taken = snapshot(self.model.policy)
+            self.worker.submit(self.model.policy, for_worker(self.model.policy, taken))
+            result = self.worker.result()
+            self.seconds += self.train_seconds() - t0
+        else:
+            result = self._validate_here()
+        self._record(steps, result)
+        if result.passed:
+            self.passed = result
+        elif self.best is not None and result.successes >= self.best[0]:
+            self.best = None  # the final policy is as good (a tie goes to it)
+
+    def keep_best(self) -> int | None:
+        """Give the model the policy of the best evaluation, when the run did not pass and an earlier
+        evaluation did better than the final policy; its step count, or None when the model keeps its own."""
+        if self.passed is not None or self.best is None:
+            return None
+        _, steps, params = self.best
+        restore(self.model.policy, params)
+        self.model.num_timesteps = steps
+        return steps
 
     def close(self) -> None:
         if self.worker is not None:
             self.worker.close()
             self.worker = None
         self.asked = []
+        self._on_training_end()
 
     def _gate_open(self) -> bool:
         buffer = getattr(self.model, "ep_success_buffer", None)
@@ -135,6 +192,7 @@ class StopOnSuccessCallback(BaseCallback):
         return bool(sum(buffer) / len(buffer) >= self.spec.threshold - self.spec.gate)
 
     def _record(self, steps: int, result: Validation) -> None:
+        self.judged = steps
         new = not self.path.is_file()
         with open(self.path, "a", newline="", encoding="utf-8") as handle:
             writer = csv.writer(handle)

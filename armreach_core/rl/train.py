@@ -45,6 +45,9 @@ class TrainResult:
     seconds: float
     #: The held-out evaluation that stopped training early (preset ``until_success``), if one did.
     passed: Validation | None = None
+    #: When the run did not pass and an earlier held-out evaluation's policy did better than the
+    #: final one: that policy's step count, the policy ``model.zip`` holds.
+    kept: int | None = None
 
 
 def _load_checkpoint(config: RunConfig, run_dir: Path, env: Any, trust: bool) -> BaseAlgorithm:
@@ -244,16 +247,20 @@ def train(
                     else:
                         model.num_timesteps = checkpoints.trained_steps
                         rows = checkpoints.trained_rows
+            trained = int(model.num_timesteps)
+            kept = None
             with signals.protect():
                 save_checkpoint(model, run_dir, train_seconds(), rows)
                 if not signals.requested:
+                    # where training got to stays in the checkpoint; the model is the best policy seen
+                    kept = until.keep_best() if until is not None else None
                     runs.atomic_save(run_dir / runs.MODEL, model.save)
         seconds = time.perf_counter() - t0
         passed = until.passed if until is not None else None
         validation = until.seconds if until is not None else 0.0
         parts = split(time.perf_counter() - call_start, env.seconds, rollouts.rollouts, rollouts.between, validation)
-        write_timing(run_dir, parts, int(model.num_timesteps))
-        return TrainResult(run_dir, int(model.num_timesteps), config.timesteps, signals.requested, seconds, passed)
+        write_timing(run_dir, parts, trained)
+        return TrainResult(run_dir, trained, config.timesteps, signals.requested, seconds, passed, kept)
     finally:
         if until is not None:
             until.close()
