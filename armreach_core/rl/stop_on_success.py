@@ -101,7 +101,7 @@ class StopOnSuccessCallback(BaseCallback):
         if result.passed:
             self.passed = result
             return False
-        if self._better(result):
+        if self._better(result) and copyable(self.model.policy):
             self.best = (result.successes, steps, snapshot(self.model.policy))
         return True
 
