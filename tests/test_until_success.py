@@ -195,12 +195,16 @@ def test_the_fast_preset_stops_at_its_first_passed_evaluation_and_holds_on_the_f
     shutil.rmtree(run_dir)
 
 
+#: Evaluation envs where success is within 0.3 m, so that a young policy succeeds now and then.
+EASY = functools.partial(ArmEnv, backend="pybullet", success_threshold=0.3, max_episode_steps=60)
+
+
 def _train_until(
-    run_dir: Path, background: bool, learner: str
+    run_dir: Path, background: bool, learner: str, *, threshold: float = 0.3, episodes: int = 10, every: int = 128
 ) -> tuple[list[dict[str, float]], int, dict[str, np.ndarray], Any]:
-    """A short run (SB3's PPO or SBX's SAC) evaluated every 128 steps on envs where success is
-    within 0.3 m, so that a young policy passes after some failures; its validation rows,
-    steps, parameters and callback."""
+    """A short run (SB3's PPO or SBX's SAC) evaluated every ``every`` steps on :data:`EASY` envs
+    (by default so that a young policy passes after some failures); its validation rows, steps,
+    parameters and callback (whose ``model`` is the run's)."""
     import jax
     from stable_baselines3.common.env_util import make_vec_env
 
@@ -216,9 +220,8 @@ def _train_until(
     else:  # the fast preset's SAC
         settings = {"learning_rate": 1e-3, "gamma": 0.95, "tau": 0.02, "batch_size": 128, "learning_starts": 200}
         model = algo_class("sac", "sbx")("MlpPolicy", venv, policy_kwargs={"net_arch": [64, 64]}, seed=0, **settings)
-    spec = UntilSuccess(threshold=0.3, episodes=10, every=128, gate=1.0, background=background)
-    easy = functools.partial(ArmEnv, backend="pybullet", success_threshold=0.3, max_episode_steps=60)
-    callback = StopOnSuccessCallback(spec, easy, run_dir, time.perf_counter)
+    spec = UntilSuccess(threshold=threshold, episodes=episodes, every=every, gate=1.0, background=background)
+    callback = StopOnSuccessCallback(spec, EASY, run_dir, time.perf_counter)
     try:
         model.learn(3000, callback=callback)
         callback.finish()
@@ -311,35 +314,22 @@ def test_a_run_that_never_passes_ends_with_the_policy_of_its_best_evaluation(tmp
     """Training to the step budget without a pass evaluates the final policy too, and the model
     ends with the policy that did best: evaluated again, it scores the best row's successes. An
     earlier policy wins only when it did strictly better than the final one."""
-    from stable_baselines3.common.env_util import make_vec_env
-
-    from armreach_core.rl.learners import algo_class
-    from armreach_core.rl.stop_on_success import StopOnSuccessCallback
     from armreach_core.rl.validation import BATCH, evaluation_envs
 
-    train_env = functools.partial(ArmEnv, backend="pybullet", max_episode_steps=50, distance_exponent=1.0)
-    venv = make_vec_env(train_env, n_envs=2, seed=0)
-    model = algo_class("ppo", "sb3")("MlpPolicy", venv, n_steps=64, batch_size=64, n_epochs=2, seed=0, device="cpu")
-    # every evaluation decided at its first failure; passing needs 40 successes in a row
-    spec = UntilSuccess(threshold=1.0, episodes=40, every=100, gate=1.0, background=background)
-    easy = functools.partial(ArmEnv, backend="pybullet", success_threshold=0.3, max_episode_steps=60)
-    callback = StopOnSuccessCallback(spec, easy, tmp_path, time.perf_counter)
-    try:
-        model.learn(3000, callback=callback)  # PPO ends its last rollout at 3,072
-        callback.finish()
-        kept = callback.keep_best()
-    finally:
-        callback.close()
-        venv.close()
-    rows = read_validations(tmp_path)
+    # every evaluation decided at its first failure; passing needs 40 successes in a row.
+    # PPO ends its last rollout at 3,072 steps.
+    spec = {"threshold": 1.0, "episodes": 40, "every": 100}
+    rows, _, _, callback = _train_until(tmp_path / "run", background, "sb3", **spec)
+    kept = callback.keep_best()
+    model = callback.model
     assert callback.passed is None and not any(row["passed"] for row in rows)
     assert rows[-1]["timesteps"] == 3072 and rows[-2]["timesteps"] < 3072  # the final policy, evaluated
     final, earlier = rows[-1]["successes"], [row["successes"] for row in rows[:-1]]
     assert final < max(earlier)  # this seed's final policy did worse than an earlier one
     assert kept == rows[earlier.index(max(earlier))]["timesteps"] == model.num_timesteps
-    envs = [easy() for _ in range(evaluation_envs(spec))]
+    envs = [EASY() for _ in range(evaluation_envs(callback.spec))]
     try:
-        again = validate(lambda obs: model.predict(obs, deterministic=True)[0], envs, spec, lanes=BATCH)
+        again = validate(lambda obs: model.predict(obs, deterministic=True)[0], envs, callback.spec, lanes=BATCH)
     finally:
         for env in envs:
             env.close()

@@ -71,8 +71,6 @@ class StopOnSuccessCallback(BaseCallback):
         self.asked: list[tuple[int, Any]] = []
         #: The best evaluation that did not pass: its successes, step count and parameters.
         self.best: tuple[int, int, Any] | None = None
-        #: The step count of the last evaluation recorded.
-        self.judged = -1
 
     def _on_training_start(self) -> None:
         self.last = int(self.model.num_timesteps)
@@ -80,33 +78,31 @@ class StopOnSuccessCallback(BaseCallback):
             self.worker = BackgroundValidator(self.make_env, self.spec)
 
     def _on_step(self) -> bool:
-        if self.worker is not None and self.worker.ready() and self._answer():
+        if self.worker is not None and self.worker.ready() and self._answer().passed:
             return False
         steps = int(self.model.num_timesteps)
         if steps - self.last < self.spec.every or not self._gate_open():
             return True
         self.last = steps
-        if self.worker is not None:
-            while len(self.asked) >= MAX_PENDING:  # answered in order, a few at a time
-                if self._answer():
-                    return False
-            t0 = self.train_seconds()
-            taken = snapshot(self.model.policy)
-            self.asked.append((steps, taken))
-            self.worker.submit(self.model.policy, for_worker(self.model.policy, taken))
-            self.seconds += self.train_seconds() - t0
-            return True
-        result = self._validate_here()
-        self._record(steps, result)
-        if result.passed:
-            self.passed = result
-            return False
-        if self._better(result) and copyable(self.model.policy):
-            self.best = (result.successes, steps, snapshot(self.model.policy))
+        if self.worker is None:
+            return not self._judge_here(steps).passed
+        while len(self.asked) >= MAX_PENDING:  # answered in order, a few at a time
+            if self._answer().passed:
+                return False
+        self._ask(steps)
         return True
 
-    def _validate_here(self) -> Validation:
-        """Evaluate the model's policy in this process."""
+    def _ask(self, steps: int) -> None:
+        """Send the worker the policy's parameters now, to be evaluated as those of step ``steps``."""
+        assert self.worker is not None
+        t0 = self.train_seconds()
+        taken = snapshot(self.model.policy)
+        self.asked.append((steps, taken))
+        self.worker.submit(self.model.policy, for_worker(self.model.policy, taken))
+        self.seconds += self.train_seconds() - t0
+
+    def _judge_here(self, steps: int) -> Validation:
+        """Evaluate the model's policy in this process and record it, as the worker's answers are."""
         if not self.envs:
             self.envs = [self.make_env() for _ in range(evaluation_envs(self.spec))]
         model = self.model
@@ -116,6 +112,11 @@ class StopOnSuccessCallback(BaseCallback):
 
         result = validate(policy, self.envs, self.spec, lanes=BATCH)
         self.seconds += result.seconds
+        self._record(steps, result)
+        if result.passed:
+            self.passed = result
+        elif self._better(result) and copyable(self.model.policy):
+            self.best = (result.successes, steps, snapshot(self.model.policy))
         return result
 
     def _better(self, result: Validation) -> bool:
@@ -123,9 +124,9 @@ class StopOnSuccessCallback(BaseCallback):
         failure that decided it (every failed evaluation stops at the same number of failures)."""
         return self.best is None or result.successes > self.best[0]
 
-    def _answer(self) -> bool:
-        """Read the worker's oldest answer (waiting for it) and record it; True when it passed,
-        the model then holding the parameters and step count it was asked about."""
+    def _answer(self) -> Validation:
+        """Read the worker's oldest answer (waiting for it) and record it; when it passed, the
+        model then holds the parameters and step count it was asked about."""
         assert self.worker is not None
         t0 = self.train_seconds()
         result = self.worker.result()
@@ -135,37 +136,33 @@ class StopOnSuccessCallback(BaseCallback):
         if not result.passed:
             if self._better(result):
                 self.best = (result.successes, steps, params)
-            return False
+            return result
         self.passed = result
         restore(self.model.policy, params)
         self.model.num_timesteps = steps
-        return True
+        return result
 
     def finish(self, wait: bool = True) -> None:
         """Once training has returned: read the evaluations still running (unless ``wait`` is
         False, as when a signal stopped training), then stop the worker."""
         while wait and self.passed is None and self.asked:
             self._answer()
-        if wait and self.passed is None and self.best is not None and self.judged != int(self.model.num_timesteps):
+        # every evaluation asked is answered by now, so self.last is the step of the last one
+        if wait and self.passed is None and self.best is not None and self.last != int(self.model.num_timesteps):
             self._judge_final()
         self.close()
 
     def _judge_final(self) -> None:
         """Evaluate the policy training ended with, against the best earlier one: it may pass, or
         stand as the best (the earlier one is then dropped)."""
-        steps = int(self.model.num_timesteps)
-        if self.worker is not None:
-            t0 = self.train_seconds()
-            taken = snapshot(self.model.policy)
-            self.worker.submit(self.model.policy, for_worker(self.model.policy, taken))
-            result = self.worker.result()
-            self.seconds += self.train_seconds() - t0
+        steps, best = int(self.model.num_timesteps), self.best
+        assert best is not None
+        if self.worker is None:
+            result = self._judge_here(steps)
         else:
-            result = self._validate_here()
-        self._record(steps, result)
-        if result.passed:
-            self.passed = result
-        elif self.best is not None and result.successes >= self.best[0]:
+            self._ask(steps)
+            result = self._answer()
+        if self.passed is None and result.successes >= best[0]:
             self.best = None  # the final policy is as good (a tie goes to it)
 
     def keep_best(self) -> int | None:
@@ -192,7 +189,6 @@ class StopOnSuccessCallback(BaseCallback):
         return bool(sum(buffer) / len(buffer) >= self.spec.threshold - self.spec.gate)
 
     def _record(self, steps: int, result: Validation) -> None:
-        self.judged = steps
         new = not self.path.is_file()
         with open(self.path, "a", newline="", encoding="utf-8") as handle:
             writer = csv.writer(handle)
