@@ -20,12 +20,16 @@ Cheap enough to run often:
   episodes at 0.98, the third), so a policy that cannot pass yet costs a few episodes, and
   at the success that makes it certain (the 98th), so that a passing policy's last one or
   two episodes, which may hover near their target until the 2,048-step limit, are not run
-  to their end: those count as failures, and a passed evaluation's success rate is a lower
-  bound;
+  to their end;
 * it runs only once the success rate of the last 100 training episodes is within ``gate``
   of the threshold (training episodes are shorter, so they under-estimate it);
 * it runs in a worker process, on the core training leaves idle, while training goes on
   (``background``, on by default; :mod:`armreach_core.rl.background`).
+
+Either way, an episode that was started and not run to its end counts as a failure, so every
+evaluation's success rate is a lower bound. Counting only the finished ones would read high
+when it fails: the quick successes finish first, and the episodes still running or parked at
+the deciding failure are the slow ones that mostly fail.
 
 Every evaluation is a row of ``validation.csv`` in the run folder;
 :class:`~armreach_core.rl.stop_on_success.StopOnSuccessCallback` runs them during training.
@@ -92,7 +96,9 @@ class UntilSuccess:
 
 @dataclass(frozen=True)
 class Validation:
-    """One evaluation: how many episodes ran, how many succeeded, whether it passed."""
+    """One evaluation: how many episodes it started (all of them when it passed), how many
+    succeeded, whether it passed. Its success rate is a lower bound: an episode not run to
+    its end counts as a failure."""
 
     episodes: int
     successes: int
@@ -123,7 +129,8 @@ def validate(
     could decide (as many as the failures still allowed, plus one) or nothing else is left to
     run. A policy that fails by hovering then costs the decisive episodes' time limits, not
     those of every lane beside them. Once enough episodes have succeeded to pass, whatever the
-    rest do, it stops and counts the rest as failures.
+    rest do, it stops and counts the rest as failures; when it fails, the episodes started and
+    not finished count as failures too (:attr:`Validation.episodes` is those started).
     """
     t0 = time.perf_counter()
     allowed, required = spec.allowed_failures, spec.episodes - spec.allowed_failures
@@ -161,7 +168,7 @@ def validate(
                     failures += 1
                 active.remove(i)
                 free.append(i)
-                if not resolving:
+                if not resolving and failures <= allowed and successes < required:
                     start()
             elif not resolving and elapsed[i] >= park_after and len(parked) < spare:
                 running.remove(i)
@@ -169,7 +176,7 @@ def validate(
                 start()
     if successes >= required:  # passed: what did not finish counts against it
         return Validation(spec.episodes, successes, True, time.perf_counter() - t0)
-    return Validation(successes + failures, successes, False, time.perf_counter() - t0)
+    return Validation(started, successes, False, time.perf_counter() - t0)
 
 
 def evaluation_envs(spec: UntilSuccess) -> int:
