@@ -200,12 +200,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self._velocity_cap = None if cap is None or (default_mapping and (cap >= self.max_joint_step).all()) else cap
 
         self._action_shape = (self.task.action_size(),)
-        size = self._action_shape[0]
-        self._action_meaning = (  # what an action is, for the error a wrong shape gets
-            f"one value in [-1, 1] per joint {list(self.robot.joint_names)}"
-            if size == self.robot.dof
-            else f"values in [-1, 1] as task {task!r} defines them"
-        )
+        self._action_meaning = self.task.action_meaning()  # for the error a wrong shape gets
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=self._action_shape, dtype=np.float32)
         self.observation_space = self.task.observation_space()
         if isinstance(self.observation_space, gym.spaces.Dict) and "desired_goal" in self.observation_space.spaces:

@@ -192,6 +192,12 @@ class Task(ABC):
         """Length of the action vector, each value in [-1, 1]; default one per actuated joint."""
         return self.robot.dof
 
+    def action_meaning(self) -> str:
+        """What an action is, for the error an action of the wrong shape gets."""
+        if self.action_size() == self.robot.dof:
+            return f"one value in [-1, 1] per joint {list(self.robot.joint_names)}"
+        return f"values in [-1, 1] as task {self.name!r} defines them"
+
     def joint_targets(self, action: FloatArray, q: FloatArray, max_joint_step: float) -> FloatArray:
         """Position targets for every actuated joint, from an action already clipped into [-1, 1].
 

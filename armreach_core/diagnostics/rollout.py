@@ -13,7 +13,8 @@ import numpy as np
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
 from armreach_core.plugins.defaults import DEFAULT_TASK
-from armreach_core.robot.ik import RESTARTS, IKPolicy
+from armreach_core.robot.ik import RESTARTS
+from armreach_core.robot.ik import reference as ik_reference
 from armreach_core.sim2real.joint_log import JointLog
 
 #: Control steps between two frames of the episode.
@@ -70,7 +71,7 @@ def rollout(
             raise ConfigError(f"task {task!r} has no reference controller; use --policy ik or random")
         obs, info = env.reset(seed=seed)
         env.action_space.seed(seed)
-        ik = IKPolicy.for_env(env, restarts=RESTARTS)
+        ik = ik_reference(env, restarts=RESTARTS)
         touches = 0
         frames = [env.backend.render(env.camera)]
         steps, total = 0, 0.0

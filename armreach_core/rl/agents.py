@@ -19,7 +19,7 @@ from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
 from armreach_core.rl.config import RunConfig
 from armreach_core.rl.learners import LEGACY_LEARNER, activation, algo_class, optimizer_kwargs
-from armreach_core.robot.ik import RESTARTS, IKPolicy
+from armreach_core.robot.ik import RESTARTS, CartesianReference, IKPolicy, reference
 from armreach_core.robot.spec import ARM_KEYS
 
 if TYPE_CHECKING:
@@ -34,7 +34,7 @@ class Agent(Protocol):
 
 
 #: Env settings evaluation keeps from training: they define what an action means.
-ACTION_SETTINGS = ("max_joint_step", "substeps", "joint_velocity_limits")
+ACTION_SETTINGS = ("max_joint_step", "substeps", "joint_velocity_limits", "control", "ee_step")
 #: Task options evaluation keeps from training: they define the observation the policy reads.
 OBSERVATION_SETTINGS = ("scaled_observation",)
 #: The arm itself (where it starts and sits, where its ROS packages are, its xacro arguments):
@@ -227,14 +227,14 @@ class IKAgent:
 
     def __init__(self, damping: float = 0.05) -> None:
         self.damping = damping
-        self._policy: IKPolicy | None = None
+        self._policy: IKPolicy | CartesianReference | None = None
 
     def describe(self) -> str:
         return f"IK with {RESTARTS} restarts, then damped least squares (damping {self.damping})"
 
     def act(self, obs: Any, env: ArmEnv) -> npt.NDArray[np.float32]:
         if self._policy is None or self._policy.robot is not env.robot:
-            self._policy = IKPolicy.for_env(env, damping=self.damping, restarts=RESTARTS)
+            self._policy = reference(env, damping=self.damping, restarts=RESTARTS)
         target = getattr(env.task, "target", None)
         if target is None:
             raise ConfigError(f"the IK controller needs a task with a target position; {env.task_name!r} has none")

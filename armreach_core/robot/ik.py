@@ -8,6 +8,7 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.robot.cartesian import displacement_action
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.robot.statics import holdable
 
@@ -218,3 +219,24 @@ class IKPolicy:
         step = self.max_joint_step
         target = np.clip(q + np.clip(action, -1.0, 1.0) * step, self.robot.lower + margin, self.robot.upper - margin)
         return np.clip((target - q) / step, -1.0, 1.0).astype(np.float32)
+
+
+class CartesianReference:
+    """The IK reference of an env whose actions are end-effector displacements (``control="ee"``):
+    the end effector straight at the target, ``step`` (m) at a time; the env's own
+    damped-least-squares step turns that into joint targets."""
+
+    def __init__(self, robot: RobotModel, step: float) -> None:
+        self.robot, self.step = robot, step
+
+    def act(self, q: npt.ArrayLike, target: npt.ArrayLike) -> npt.NDArray[np.float32]:
+        return displacement_action(self.robot.forward_kinematics(q), target, self.step)
+
+
+def reference(env: Stepping, **options: Any) -> IKPolicy | CartesianReference:
+    """The IK reference for ``env``'s actions: :class:`IKPolicy` (``options`` passed on) for joint
+    actions, :class:`CartesianReference` when its task's actions move the end effector."""
+    task = getattr(env, "task", None)
+    if getattr(task, "control", "joints") == "ee":
+        return CartesianReference(env.robot, task.end_effector_step(env.max_joint_step))  # type: ignore[union-attr]
+    return IKPolicy.for_env(env, **options)

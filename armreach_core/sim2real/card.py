@@ -75,10 +75,7 @@ def policy_card(env: ArmEnv, algo: str, learner: str, keys: list[str] | None, ru
             "size": int(env.action_space.shape[0]),  # type: ignore[index]
             "low": -1.0,
             "high": 1.0,
-            "meaning": (
-                "joint target = measured joint position + action * max_joint_step, each joint's change at most "
-                "its velocity limit * control_dt when joint_velocity_limits is true, clipped to the limits"
-            ),
+            **_action_meaning(env),
             "max_joint_step": env.max_joint_step,
             "joint_velocity_limits": env.joint_velocity_limits,
         },
@@ -125,3 +122,26 @@ def export_run(run_dir: str | os.PathLike[str], out: str | os.PathLike[str], *, 
 
 
 __all__ = ["export_run", "policy_card"]
+
+
+def _action_meaning(env: ArmEnv) -> dict[str, Any]:
+    """What the card's action means: joint changes, or (``control="ee"``) end-effector displacements."""
+    task: Any = env.task
+    if getattr(task, "control", "joints") != "ee":
+        return {
+            "meaning": (
+                "joint target = measured joint position + action * max_joint_step, each joint's change at most "
+                "its velocity limit * control_dt when joint_velocity_limits is true, clipped to the limits"
+            )
+        }
+    return {
+        "meaning": (
+            "end-effector displacement = action * ee_step (m, world frame), turned into joint targets by one "
+            "damped-least-squares step on the URDF model (armreach_core.robot.cartesian.joint_targets), every "
+            "joint's change at most max_joint_step (and its velocity limit * control_dt when "
+            "joint_velocity_limits is true), inside the limits"
+        ),
+        "control": "ee",
+        "ee_step": task.end_effector_step(env.max_joint_step),
+    }
+

@@ -57,6 +57,7 @@ def twin_env(card: dict[str, Any], backend: str) -> ArmEnv:
         arm=arm,
         max_joint_step=action["max_joint_step"],
         joint_velocity_limits=bool(action.get("joint_velocity_limits", False)),  # cards before it: no cap
+        **({"control": "ee", "ee_step": action["ee_step"]} if action.get("control") == "ee" else {}),
     )
 
 

@@ -27,6 +27,7 @@ from gymnasium import spaces
 
 from armreach_core.backend import ArmState
 from armreach_core.errors import ConfigError, URDFError
+from armreach_core.robot import cartesian
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.robot.workspace import TargetSampler, reachability_map
 from armreach_core.task import (
@@ -56,6 +57,8 @@ JOINTS, EE, TARGET, VELOCITIES, DELTA = (
 )
 
 
+#: What an action may command (``control``): each joint's change, or the end effector's displacement.
+CONTROLS = ("joints", "ee")
 #: The least scale (rad, m, rad/s) an observed value is divided by under ``scaled_observation``.
 MIN_SCALE = 1e-3
 #: The default target ball's radius as a fraction of the arm's reach (its centre is at half the reach,
@@ -93,6 +96,13 @@ class ReachTask(Task):
             and the end effector to the target over the ball's radius, joint velocities over the
             URDF velocity limits; default False. A network then sees a 3 m arm's task in the
             numbers it sees a 50 cm arm's in (the ``any-arm`` preset).
+        control: what an action commands. ``"joints"`` (the paper's, the default): one value per
+            actuated joint, each joint's change in ``max_joint_step`` units. ``"ee"``: three
+            values, the end effector's displacement in the world frame in ``ee_step`` units,
+            turned into joint targets by one damped-least-squares step on the URDF model that keeps
+            every joint inside its limits (:mod:`armreach_core.robot.cartesian`).
+        ee_step: with ``control="ee"``, the displacement (m) of an action of 1 along an axis;
+            default ``max_joint_step`` times the arm's reach, what a joint step at full reach moves.
     """
 
     name = "reach"
@@ -110,6 +120,8 @@ class ReachTask(Task):
         targets_clear_of_arm: bool = True,
         goal_conditioned: bool = False,
         scaled_observation: bool = False,
+        control: str = "joints",
+        ee_step: float | None = None,
     ) -> None:
         super().__init__(robot)
         if not (np.isfinite(success_threshold) and success_threshold > 0):
@@ -122,6 +134,11 @@ class ReachTask(Task):
         self.success_threshold = float(success_threshold)
         self.success_bonus = float(success_bonus)
         self.goal_conditioned = bool(goal_conditioned)
+        if control not in CONTROLS:
+            raise ConfigError(f"control={control!r} is not one of {', '.join(map(repr, CONTROLS))}")
+        if ee_step is not None and not (np.isfinite(ee_step) and ee_step > 0):
+            raise ConfigError(f"ee_step={ee_step!r} must be a positive distance (m)")
+        self.control, self.ee_step = control, None if ee_step is None else float(ee_step)
         reach = reachability_map(robot).reach
         clear = self.success_threshold if targets_clear_of_arm else None
         if target_radius is None:
@@ -156,6 +173,26 @@ class ReachTask(Task):
         self._flat = np.zeros(self.layout.size)
         self._views = self.layout.views(self._flat)
         self.target = self.sampler.center.copy()
+
+    def action_size(self) -> int:
+        return 3 if self.control == "ee" else self.robot.dof
+
+    def action_meaning(self) -> str:
+        if self.control == "ee":
+            return "three values in [-1, 1], the end effector's displacement along x, y and z (control='ee')"
+        return super().action_meaning()
+
+    def end_effector_step(self, max_joint_step: float) -> float:
+        """With ``control="ee"``, the displacement (m) of an action of 1 along an axis."""
+        return self.ee_step if self.ee_step is not None else max_joint_step * self.sampler.map.reach
+
+    def joint_targets(self, action: FloatArray, q: FloatArray, max_joint_step: float) -> FloatArray:
+        if self.control == "joints":
+            return q + action * max_joint_step
+        step = self.end_effector_step(max_joint_step)
+        return cartesian.joint_targets(
+            self.robot, q, action * step, reach=self.sampler.map.reach, max_joint_step=max_joint_step
+        )
 
     @property
     def target(self) -> FloatArray:
@@ -331,9 +368,9 @@ class _IKDemonstrator:
         self.reset()
 
     def reset(self) -> None:
-        from armreach_core.robot.ik import RESTARTS, IKPolicy
+        from armreach_core.robot.ik import RESTARTS, reference
 
-        self.policy = IKPolicy.for_env(self.env, restarts=RESTARTS)
+        self.policy = reference(self.env, restarts=RESTARTS)
 
     def act(self, observation: Any) -> npt.NDArray[np.float32]:
         return self.policy.act(self.env.backend.joint_state()[0], self.task.target)

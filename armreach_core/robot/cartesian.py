@@ -1,0 +1,67 @@
+"""End-effector (Cartesian) control: a displacement of the end effector as joint position targets.
+
+What a task with ``control="ee"`` does with an action (as panda-gym's ``control_type="ee"``
+and robosuite's operational-space controllers do): the action is a displacement of the end
+effector in the world frame, and one damped-least-squares step on the URDF model turns it
+into joint position targets. Every length is the arm's own: the damping is a fraction of the
+arm's reach, so that a 3 m arm and a 50 cm arm get the same controller, scaled.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from armreach_core.robot.model import FloatArray, RobotModel
+
+#: The damping of the least-squares step as a fraction of the arm's reach (m): small enough that the
+#: step follows the displacement away from singular poses, large enough to keep it bounded near them.
+DAMPING_PER_REACH = 0.05
+#: How far inside its limits every joint's target is kept (rad or m), as the IK reference keeps them.
+LIMIT_MARGIN = 1e-7
+
+
+def joint_targets(
+    robot: RobotModel,
+    q: npt.ArrayLike,
+    displacement: npt.ArrayLike,
+    *,
+    reach: float,
+    max_joint_step: float,
+) -> FloatArray:
+    """Joint position targets that move the end effector by ``displacement`` (m, world frame) from
+    angles ``q``: one damped-least-squares step, every joint within its limits.
+
+    A joint that the step would take past a limit is held where it is and the step is solved
+    again without it, so the other joints make up the displacement rather than the target being
+    clipped off its line. The whole step is then scaled down, keeping its direction, until no
+    joint moves more than ``max_joint_step``; the targets lie :data:`LIMIT_MARGIN` inside the
+    limits, so a controller on a real arm never commands one past them.
+    """
+    q_arr = np.asarray(q, dtype=np.float64)
+    dx = np.asarray(displacement, dtype=np.float64)
+    jac = robot.jacobian(q_arr)
+    margin = np.minimum(LIMIT_MARGIN, (robot.upper - robot.lower) / 4)
+    low, high = robot.lower + margin, robot.upper - margin
+    damping = (DAMPING_PER_REACH * reach) ** 2 * np.eye(3)
+    dq = jac.T @ np.linalg.solve(jac @ jac.T + damping, dx)
+    held = ((q_arr + dq > high) & (dq > 0)) | ((q_arr + dq < low) & (dq < 0))
+    if held.any():
+        jac[:, held] = 0.0
+        dq = jac.T @ np.linalg.solve(jac @ jac.T + damping, dx)
+        dq[held] = 0.0
+    largest = float(np.max(np.abs(dq))) if dq.size else 0.0
+    if largest > max_joint_step:
+        dq *= max_joint_step / largest
+    result: FloatArray = np.clip(q_arr + dq, low, high)
+    return result
+
+
+def displacement_action(ee: npt.ArrayLike, target: npt.ArrayLike, step: float) -> npt.NDArray[np.float32]:
+    """The action of ``control="ee"`` that moves the end effector at ``ee`` straight towards ``target``:
+    the whole way when it is within ``step`` (m), else ``step`` along the line (the reference controller)."""
+    error = (np.asarray(target, dtype=np.float64) - np.asarray(ee, dtype=np.float64)) / step
+    largest = float(np.max(np.abs(error)))
+    if largest > 1.0:
+        error /= largest
+    return error.astype(np.float32)
