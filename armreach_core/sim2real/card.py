@@ -144,4 +144,3 @@ def _action_meaning(env: ArmEnv) -> dict[str, Any]:
         "control": "ee",
         "ee_step": task.end_effector_step(env.max_joint_step),
     }
-

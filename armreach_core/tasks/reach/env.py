@@ -34,7 +34,9 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     at 24 Hz). Actions outside [-1, 1] are
     clipped into it; NaN, inf, a wrong shape or a dtype that is not real numbers (bool,
     complex, str, object) raise :class:`~armreach_core.ActionError` and leave the state
-    untouched.
+    untouched. With ``control="ee"`` an action is three values instead, the end effector's
+    displacement along x, y and z in units of ``ee_step``, turned into joint targets by one
+    damped-least-squares step on the URDF model that keeps every joint inside its limits.
 
     ## Observation space
 
@@ -106,6 +108,8 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     | ``targets_clear_of_arm`` | ``True`` | targets keep ``success_threshold`` from the arm's links at home |
     | ``goal_conditioned`` | ``False`` | a ``Dict`` observation for HER |
     | ``scaled_observation`` | ``False`` | the observation in the arm's own units (joint ranges, target ball, velocity limits) |
+    | ``control`` | ``"joints"`` | what an action commands: each joint's change, or (``"ee"``) the end effector's displacement |
+    | ``ee_step`` | ``max_joint_step`` × the reach | with ``control="ee"``, the displacement (m) of an action of 1 along an axis |
 
     ## Version history
 
