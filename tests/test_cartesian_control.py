@@ -184,3 +184,17 @@ def test_an_exported_ee_policy_card_says_what_its_action_moves(ee_run: Path, tmp
     finally:
         trained.close()
         twin.close()
+
+
+def test_a_grippers_joints_are_held_at_home_while_the_arm_moves() -> None:
+    """The fingers of the bundled arm with a gripper do not move the end effector: an ee action sends
+    them back to their home opening wherever they are, and moves only the arm's joints."""
+    env = ArmEnv("reach", backend="pybullet", robot="ar6-gripper", control="ee")
+    robot, reach = env.robot, env.task.sampler.map.reach  # type: ignore[attr-defined]
+    env.close()
+    assert robot.dof == robot.arm_dof + 2
+    q = robot.home.copy()
+    q[robot.arm_dof :] = robot.lower[robot.arm_dof :]  # fingers closed
+    targets = cartesian.joint_targets(robot, q, [0.02, 0.0, 0.0], reach=reach, max_joint_step=0.05)
+    np.testing.assert_allclose(targets[robot.arm_dof :], robot.home[robot.arm_dof :], atol=1e-6)  # open: at a limit
+    assert np.abs(targets[: robot.arm_dof] - q[: robot.arm_dof]).max() > 0

@@ -36,7 +36,8 @@ def joint_targets(
     again without it, so the other joints make up the displacement rather than the target being
     clipped off its line. The whole step is then scaled down, keeping its direction, until no
     joint moves more than ``max_joint_step``; the targets lie :data:`LIMIT_MARGIN` inside the
-    limits, so a controller on a real arm never commands one past them.
+    limits, so a controller on a real arm never commands one past them. A gripper's joints (past
+    the arm's chain) are held at their home angles.
     """
     q_arr = np.asarray(q, dtype=np.float64)
     dx = np.asarray(displacement, dtype=np.float64)
@@ -50,9 +51,11 @@ def joint_targets(
         jac[:, held] = 0.0
         dq = jac.T @ np.linalg.solve(jac @ jac.T + damping, dx)
         dq[held] = 0.0
-    largest = float(np.max(np.abs(dq))) if dq.size else 0.0
+    tool = slice(robot.arm_dof, None)  # a gripper's joints do not move the end effector: held at home
+    dq[tool] = robot.home[tool] - q_arr[tool]
+    largest = float(np.max(np.abs(dq[: robot.arm_dof]))) if robot.arm_dof else 0.0
     if largest > max_joint_step:
-        dq *= max_joint_step / largest
+        dq[: robot.arm_dof] *= max_joint_step / largest
     result: FloatArray = np.clip(q_arr + dq, low, high)
     return result
 
