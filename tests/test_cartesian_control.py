@@ -16,7 +16,7 @@ from armreach_core.env import ArmEnv
 from armreach_core.rl.agents import IKAgent, env_kwargs
 from armreach_core.rl.runs import read_config
 from armreach_core.robot import cartesian
-from tests.conftest import BACKENDS
+from tests.conftest import BACKENDS, TINY
 
 
 def _moves(env: ArmEnv, action: np.ndarray, steps: int) -> tuple[np.ndarray, float]:
@@ -143,15 +143,22 @@ def test_a_bad_control_option_is_a_config_error(options: dict[str, Any], problem
 
 @pytest.fixture(scope="module")
 def ee_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A short PPO run whose env has ``control: ee``."""
+    """A short PPO run of the tiny preset with ``armreach train --control ee``."""
     folder = tmp_path_factory.mktemp("ee")
-    preset = folder / "ee.yaml"
-    preset.write_text(
-        "reach:\n  ppo:\n    timesteps: 128\n    env: {max_episode_steps: 64, control: ee}\n"
-        "    policy: {net_arch: [16, 16]}\n    n_steps: 64\n    batch_size: 32\n    n_epochs: 1\n"
+    preset = folder / "tiny.yaml"
+    preset.write_text(TINY)
+    assert (
+        main(["train", "--preset", str(preset), "--algo", "ppo", "--control", "ee", "--out", str(folder / "run")]) == 0
     )
-    assert main(["train", "--preset", str(preset), "--out", str(folder / "run")]) == 0
     return folder / "run"
+
+
+def test_control_is_refused_for_a_task_with_actions_of_its_own(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["train", "--task", "grasp", "--preset", "grasp", "--control", "ee", "--out", str(tmp_path / "run")]
+    assert main(argv) == 2
+    assert "task 'grasp' defines its own actions" in capsys.readouterr().err and not (tmp_path / "run").exists()
 
 
 def test_a_run_trained_with_ee_actions_is_evaluated_with_them(ee_run: Path) -> None:

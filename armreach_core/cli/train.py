@@ -51,6 +51,13 @@ def add_parser(sub: Any) -> None:
     parser.add_argument("--backend", default=DEFAULT_BACKEND, help="physics backend (default: %(default)s)")
     parser.add_argument("--her", action="store_true", help="hindsight experience replay (off-policy algorithms)")
     parser.add_argument(
+        "--control",
+        choices=("joints", "ee"),
+        default=None,
+        help="what an action commands: each joint's change (the paper's) or the end effector's displacement "
+        "(default: the preset's, else joints)",
+    )
+    parser.add_argument(
         "--physics", default=None, metavar="PROFILE", help="train on a fitted physics profile (armreach sysid)"
     )
     parser.add_argument(
@@ -132,6 +139,9 @@ def run(args: argparse.Namespace) -> int:
         )
         if args.until_success is not None:
             config = with_until_success(config, args.until_success)
+        if args.control is not None:
+            _check_control(config.task)
+            config = config.with_settings(env={**config.settings.get("env", {}), "control": args.control})
         # before the run folder is made: a failing command leaves none behind
         check_backends([config.backend])
         description = {key: value for key, value in config.arm.env_kwargs().items() if key in DESCRIPTION_FLAGS}
@@ -211,3 +221,14 @@ def check_device(device: str) -> None:
         torch.device(device)
     except (RuntimeError, ValueError):
         raise ConfigError(f"--device {device!r} is not a torch device; use auto, cpu or cuda[:N]") from None
+
+
+def _check_control(task: str) -> None:
+    """A :class:`ConfigError` when ``task`` has no ``control`` option (its actions are its own)."""
+    import inspect
+
+    from armreach_core.plugins.lookup import task_spec
+
+    parameters = inspect.signature(task_spec(task).task_class()).parameters.values()
+    if not any(p.name == "control" or p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters):
+        raise ConfigError(f"--control: task {task!r} defines its own actions and has no control option; drop --control")
