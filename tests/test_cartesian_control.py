@@ -153,6 +153,7 @@ def ee_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder / "run"
 
 
+@pytest.mark.training
 def test_control_is_refused_for_a_task_with_actions_of_its_own(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -161,6 +162,7 @@ def test_control_is_refused_for_a_task_with_actions_of_its_own(
     assert "task 'grasp' defines its own actions" in capsys.readouterr().err and not (tmp_path / "run").exists()
 
 
+@pytest.mark.training
 def test_a_run_trained_with_ee_actions_is_evaluated_with_them(ee_run: Path) -> None:
     """``control`` is part of what an action means, so evaluation keeps it (a 3-value policy on a
     joint-space env is an ActionError), and the run folder records it."""
@@ -171,6 +173,7 @@ def test_a_run_trained_with_ee_actions_is_evaluated_with_them(ee_run: Path) -> N
     assert summary["episodes"] == 2
 
 
+@pytest.mark.training
 def test_an_exported_ee_policy_card_says_what_its_action_moves(ee_run: Path, tmp_path: Path) -> None:
     """The card names the control and its step, and the deploy loop's twin env turns an action into
     the joint targets the training env did."""
