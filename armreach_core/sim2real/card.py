@@ -121,9 +121,6 @@ def export_run(run_dir: str | os.PathLike[str], out: str | os.PathLike[str], *, 
     return paths
 
 
-__all__ = ["export_run", "policy_card"]
-
-
 def _action_meaning(env: ArmEnv) -> dict[str, Any]:
     """What the card's action means: joint changes, or (``control="ee"``) end-effector displacements."""
     task: Any = env.task
@@ -144,3 +141,6 @@ def _action_meaning(env: ArmEnv) -> dict[str, Any]:
         "control": "ee",
         "ee_step": task.end_effector_step(env.max_joint_step),
     }
+
+
+__all__ = ["export_run", "policy_card"]
