@@ -17,8 +17,17 @@ from armreach_core.robot.model import FloatArray, RobotModel
 #: The damping of the least-squares step as a fraction of the arm's reach (m): small enough that the
 #: step follows the displacement away from singular poses, large enough to keep it bounded near them.
 DAMPING_PER_REACH = 0.05
-#: How far inside its limits every joint's target is kept (rad or m), as the IK reference keeps them.
+#: How far inside its limits a controller keeps every joint's target (rad or m), here and in the IK
+#: reference: more than an action's float32 rounding moves a target (about 3e-9), far less than any
+#: joint's motion.
 LIMIT_MARGIN = 1e-7
+
+
+def target_bounds(robot: RobotModel) -> tuple[FloatArray, FloatArray]:
+    """The lowest and highest joint targets a controller commands: :data:`LIMIT_MARGIN` inside the
+    limits (a quarter of a joint's range where that is less)."""
+    margin = np.minimum(LIMIT_MARGIN, (robot.upper - robot.lower) / 4)
+    return robot.lower + margin, robot.upper - margin
 
 
 def joint_targets(
@@ -42,8 +51,7 @@ def joint_targets(
     q_arr = np.asarray(q, dtype=np.float64)
     dx = np.asarray(displacement, dtype=np.float64)
     jac = robot.jacobian(q_arr)
-    margin = np.minimum(LIMIT_MARGIN, (robot.upper - robot.lower) / 4)
-    low, high = robot.lower + margin, robot.upper - margin
+    low, high = target_bounds(robot)
     damping = (DAMPING_PER_REACH * reach) ** 2 * np.eye(3)
     dq = jac.T @ np.linalg.solve(jac @ jac.T + damping, dx)
     held = ((q_arr + dq > high) & (dq > 0)) | ((q_arr + dq < low) & (dq < 0))

@@ -8,7 +8,7 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.robot.cartesian import displacement_action
+from armreach_core.robot.cartesian import displacement_action, target_bounds
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.robot.statics import holdable
 
@@ -119,11 +119,6 @@ class Stepping(Protocol):
     def joint_step(self) -> FloatArray: ...
 
 
-#: How far inside its limits the IK reference keeps every joint's target (rad or m): more than an
-#: action's float32 rounding moves a target (about 3e-9), far less than any joint's motion.
-LIMIT_MARGIN = 1e-7
-
-
 class IKPolicy:
     """A controller that maps the reach env's state to actions with one DLS step per control step.
 
@@ -208,16 +203,17 @@ class IKPolicy:
         return self._inside(q_arr, dq / self.max_joint_step)
 
     def _inside(self, q: FloatArray, action: FloatArray) -> npt.NDArray[np.float32]:
-        """``action`` clipped into [-1, 1], with every joint's target at least :data:`LIMIT_MARGIN` inside its limits.
+        """``action`` clipped into [-1, 1], with every joint's target within
+        :func:`~armreach_core.robot.cartesian.target_bounds`.
 
         An engine reads a joint resting on its limit a hair past it (Vega's lift 35 µm below 0
         under its own weight, the Kinova's third joint 1e-8 rad); an action that left it there
         would command a target outside the limits, which the paper's rule counts as a violation
         and ends the episode on. Such a joint is pulled back inside instead.
         """
-        margin = np.minimum(LIMIT_MARGIN, (self.robot.upper - self.robot.lower) / 4)
+        low, high = target_bounds(self.robot)
         step = self.max_joint_step
-        target = np.clip(q + np.clip(action, -1.0, 1.0) * step, self.robot.lower + margin, self.robot.upper - margin)
+        target = np.clip(q + np.clip(action, -1.0, 1.0) * step, low, high)
         return np.clip((target - q) / step, -1.0, 1.0).astype(np.float32)
 
 

@@ -188,7 +188,7 @@ class ReachTask(Task):
 
     def joint_targets(self, action: FloatArray, q: FloatArray, max_joint_step: float) -> FloatArray:
         if self.control == "joints":
-            return q + action * max_joint_step
+            return super().joint_targets(action, q, max_joint_step)
         step = self.end_effector_step(max_joint_step)
         return cartesian.joint_targets(
             self.robot, q, action * step, reach=self.sampler.map.reach, max_joint_step=max_joint_step
