@@ -21,6 +21,7 @@ from stable_baselines3.common.type_aliases import ReplayBufferSamples
 from stable_baselines3.common.vec_env import VecNormalize
 
 from armreach_core.errors import ConfigError
+from armreach_core.task import Demonstrator
 
 #: Seeds of demonstration episodes start here (evaluation uses 10,000 on; training seeds are spread
 #: 31-bit numbers), so that a demonstration never replays an evaluation episode.
@@ -67,18 +68,27 @@ class DemoReplayBuffer(ReplayBuffer):
         return ReplayBufferSamples(*joined)
 
 
+def reference_controller(env: Any, key: str) -> Demonstrator:
+    """``env``'s task's reference controller, for the preset key ``key``; a :class:`ConfigError` when it has none.
+
+    The task may also refuse one for the env's options (reach-around's planner under ``control="ee"``).
+    """
+    demonstrator: Demonstrator | None = env.task.demonstrator(env)
+    if demonstrator is None:
+        raise ConfigError(
+            f"{key}: task {env.task_name!r} has no reference controller (Task.demonstrator); "
+            f"remove the preset's {key} key"
+        )
+    return demonstrator
+
+
 def collect(env: Any, buffer: DemoReplayBuffer, episodes: int) -> tuple[int, float]:
     """Run ``env``'s task's reference controller for ``episodes`` seeded episodes into ``buffer.demos``.
 
     ``env`` is a single env built like the training env (``ArmEnv``, which ends its own
     episodes at ``max_episode_steps``). Returns the steps taken and the controller's success rate.
     """
-    demonstrator = env.task.demonstrator(env)
-    if demonstrator is None:
-        raise ConfigError(
-            f"demonstrations: task {env.task_name!r} has no reference controller (Task.demonstrator); "
-            "remove the preset's demonstrations key"
-        )
+    demonstrator = reference_controller(env, "demonstrations")
     steps, successes = 0, 0
     for episode in range(episodes):
         demonstrator.reset()

@@ -33,9 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from armreach_core.errors import ConfigError
 from armreach_core.rl.collection import Collector, Dataset, Rollout, episode
-from armreach_core.rl.demonstrations import DEMO_SEED
+from armreach_core.rl.demonstrations import DEMO_SEED, reference_controller
 
 #: Seeds of the learner's rollouts start here, past any demonstration episode's.
 ROLLOUT_SEED = DEMO_SEED + 500_000
@@ -83,12 +82,7 @@ def imitate(
 
     ``env_kwargs`` build the envs of the worker processes (``workers`` above 1).
     """
-    demonstrator = env.task.demonstrator(env)
-    if demonstrator is None:
-        raise ConfigError(
-            f"imitation: task {env.task_name!r} has no reference controller (Task.demonstrator); "
-            "remove the preset's imitation key"
-        )
+    demonstrator = reference_controller(env, "imitation")
     episodes, rounds = int(spec.get("episodes", 100)), int(spec.get("rounds", 4))
     rollouts, beta = int(spec.get("rollouts", 50)), float(spec.get("beta", 0.5))
     noise, workers = float(spec.get("noise", 0.0)), int(spec.get("workers", 1))

@@ -138,6 +138,22 @@ def _imitate(config: RunConfig, model: Any, run_dir: Path, stream: TextIO | None
     runs.write_json(run_dir / runs.IMITATION, record)
 
 
+def _check_reference(config: RunConfig) -> None:
+    """Before any folder is made: the task has a reference controller for the demonstrations or imitation asked."""
+    keys = [key for key in ("demonstrations", "imitation") if key in config.settings]
+    if not keys:
+        return
+    from armreach_core.env import ArmEnv
+    from armreach_core.rl.agents import env_kwargs
+    from armreach_core.rl.demonstrations import reference_controller
+
+    env = ArmEnv(**env_kwargs(config))
+    try:
+        reference_controller(env.unwrapped, keys[0])
+    finally:
+        env.close()
+
+
 def _until_success(config: RunConfig, run_dir: Path, train_seconds: Any) -> StopOnSuccessCallback | None:
     """The callback that stops training at its first passed held-out evaluation, if the preset asks for one."""
     spec = UntilSuccess.from_settings(config.settings)
@@ -187,6 +203,7 @@ def train(
             raise ConfigError(f"{run_dir} has no {runs.CHECKPOINT} to resume from; start it again without --resume")
         runs.truncate_monitors(run_dir, progress.get("monitor_rows", {}))
     else:
+        _check_reference(config)
         runs.new_run_dir(run_dir)
     configure_threads(config.torch_threads, config.device)
     call_start = time.perf_counter()

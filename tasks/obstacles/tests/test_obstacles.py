@@ -221,6 +221,18 @@ def test_a_short_imitation_run_of_the_shipped_preset_learns_and_evaluates(tmp_pa
 
 
 @pytest.mark.training
+def test_training_by_imitation_with_ee_actions_is_refused_before_any_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    pytest.importorskip("stable_baselines3")
+    from armreach_core.cli import main
+
+    argv = ["train", "--task", "reach-around", "--preset", "reach-around", "--control", "ee"]
+    assert main([*argv, "--out", str(tmp_path / "run")]) == 2
+    assert "path of joint angles" in capsys.readouterr().err and not (tmp_path / "run").exists()
+
+
+@pytest.mark.training
 def test_evaluation_counts_collisions_and_clearance_for_the_planner() -> None:
     pytest.importorskip("stable_baselines3")
     from armreach_obstacles.baseline import evaluate_planner
@@ -237,6 +249,20 @@ def test_rollout_runs_the_tasks_reference_controller() -> None:
 
     result = rollout(BACKENDS[0], policy="reference", task="reach-around", seed=1, max_steps=200)
     assert result.summary["is_success"] and result.summary["collision_steps"] == 0
+
+
+def test_the_planner_reference_refuses_end_effector_actions_by_name() -> None:
+    """Its path is of joint angles: under control='ee' the reference is a ConfigError, not a wrong-shape action."""
+    from armreach_core.diagnostics.rollout import rollout
+
+    with pytest.raises(armreach_core.ConfigError, match="control='joints'"):
+        rollout(BACKENDS[0], policy="reference", task="reach-around", env_kwargs={"control": "ee"}, max_steps=5)
+    # the same env trains and steps on its own (the option itself is the reach task's)
+    env = gym.make(ENV_ID, backend=BACKENDS[0], control="ee")
+    env.reset(seed=0)
+    assert env.action_space.shape == (3,)
+    env.step(env.action_space.sample())
+    env.close()
 
 
 @pytest.mark.parametrize(
