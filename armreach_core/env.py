@@ -191,6 +191,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             self.task: Task = spec.task_class()(self.robot, **task_options)
         except TypeError as exc:
             raise ConfigError(f"bad option for task {task!r}: {exc}") from exc
+        self.task.joint_step = self.joint_step
         # whether the task ends episodes for reasons of its own (reach never does: no call per step)
         self._task_ends = type(self.task).ended is not Task.ended
         # The cap each step applies: none where the task's own mapping never moves a joint past it

@@ -180,6 +180,10 @@ class Task(ABC):
     #: How the task scales its flat observation from SI units (``None``: it does not). An exported
     #: policy folds it into its first layer, so that a robot feeds it SI units (armreach export).
     observation_scaling: Scaling | None = None
+    #: Each joint's largest change in one step (rad or m): the env's ``max_joint_step`` within the
+    #: URDF velocity limits over the control period, set by the env when it builds the task
+    #: (``None`` outside an env). A task that maps its actions its own way may keep within it.
+    joint_step: FloatArray | None = None
 
     def __init__(self, robot: RobotModel) -> None:
         self.robot = robot

@@ -36,34 +36,47 @@ def joint_targets(
     displacement: npt.ArrayLike,
     *,
     reach: float,
-    max_joint_step: float,
+    max_joint_step: float | npt.ArrayLike,
 ) -> FloatArray:
     """Joint position targets that move the end effector by ``displacement`` (m, world frame) from
     angles ``q``: one damped-least-squares step, every joint within its limits.
 
+    ``max_joint_step`` bounds each joint's change: one bound for all, or one per joint (the env's
+    ``joint_step``, the URDF velocity limits over the control period). The step is weighted by the
+    squares of those bounds, so that each joint takes a share of the motion in proportion to how
+    fast it can move and a slow joint (a humanoid's lift) is not asked for what it cannot do in one
+    step; with one bound for all, the weights are 1 and the step is plain damped least squares.
+
     A joint that the step would take past a limit is held where it is and the step is solved
     again without it, so the other joints make up the displacement rather than the target being
     clipped off its line. The whole step is then scaled down, keeping its direction, until no
-    joint moves more than ``max_joint_step``; the targets lie :data:`LIMIT_MARGIN` inside the
+    joint moves more than its bound; the targets lie :data:`LIMIT_MARGIN` inside the
     limits, so a controller on a real arm never commands one past them. A gripper's joints (past
     the arm's chain) are held at their home angles.
     """
     q_arr = np.asarray(q, dtype=np.float64)
     dx = np.asarray(displacement, dtype=np.float64)
+    arm = slice(None, robot.arm_dof)
+    bounds = np.broadcast_to(np.asarray(max_joint_step, dtype=np.float64), q_arr.shape)
+    weight = np.ones_like(q_arr)
+    if robot.arm_dof:
+        weight[arm] = (bounds[arm] / bounds[arm].max()) ** 2
     jac = robot.jacobian(q_arr)
     low, high = target_bounds(robot)
     damping = (DAMPING_PER_REACH * reach) ** 2 * np.eye(3)
-    dq = jac.T @ np.linalg.solve(jac @ jac.T + damping, dx)
+    dq = weight * (jac.T @ np.linalg.solve((jac * weight) @ jac.T + damping, dx))
     held = ((q_arr + dq > high) & (dq > 0)) | ((q_arr + dq < low) & (dq < 0))
     if held.any():
         jac[:, held] = 0.0
-        dq = jac.T @ np.linalg.solve(jac @ jac.T + damping, dx)
+        dq = weight * (jac.T @ np.linalg.solve((jac * weight) @ jac.T + damping, dx))
         dq[held] = 0.0
     tool = slice(robot.arm_dof, None)  # a gripper's joints do not move the end effector: held at home
     dq[tool] = robot.home[tool] - q_arr[tool]
-    largest = float(np.max(np.abs(dq[: robot.arm_dof]))) if robot.arm_dof else 0.0
-    if largest > max_joint_step:
-        dq[: robot.arm_dof] *= max_joint_step / largest
+    with np.errstate(divide="ignore"):
+        room = bounds[arm] / np.abs(dq[arm])  # how many such steps each joint's bound allows
+    fraction = float(np.min(room)) if robot.arm_dof else 1.0
+    if fraction < 1.0:
+        dq[arm] *= fraction
     result: FloatArray = np.clip(q_arr + dq, low, high)
     return result
 

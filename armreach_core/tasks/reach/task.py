@@ -190,8 +190,9 @@ class ReachTask(Task):
         if self.control == "joints":
             return super().joint_targets(action, q, max_joint_step)
         step = self.end_effector_step(max_joint_step)
+        bounds = max_joint_step if self.joint_step is None else self.joint_step  # the env's, per joint
         return cartesian.joint_targets(
-            self.robot, q, action * step, reach=self.sampler.map.reach, max_joint_step=max_joint_step
+            self.robot, q, action * step, reach=self.sampler.map.reach, max_joint_step=bounds
         )
 
     @property
