@@ -71,6 +71,22 @@ def test_jacobian_matches_finite_differences(ar6_urdf):
     assert np.allclose(robot.jacobian(q), numeric, atol=1e-6)
 
 
+def test_a_batch_s_jacobian_is_each_pose_s_with_numpy_s_cross_products_to_the_bit(ar6_urdf):
+    """The columns come from one cross product for all joints (its speed is the end-effector
+    controller's), the same products as ``np.cross`` in the same order: pinned trajectories keep."""
+    from armreach_core.robot.placement import cross
+
+    robot = RobotModel(ar6_urdf)
+    q = robot.sample_configurations(np.random.default_rng(2), 5)
+    batch = robot.jacobian(q)
+    assert batch.shape == (5, 3, robot.dof)
+    for k in range(5):
+        assert np.array_equal(batch[k], robot.jacobian(q[k]))
+    a, b = np.random.default_rng(3).normal(size=(2, 7, 4, 3))
+    assert np.array_equal(cross(a, b), np.cross(a, b))
+    assert np.array_equal(cross(a[0, 0], b[:, 1]), np.cross(a[0, 0], b[:, 1]))
+
+
 def test_ee_link_choice_changes_fk(ar6_urdf):
     tool = RobotModel(ar6_urdf)
     wrist = RobotModel(ar6_urdf, ee_link="wrist_3_link")

@@ -37,7 +37,7 @@ from armreach_core.robot.joints import (
     tool_joint,
     tree_joints,
 )
-from armreach_core.robot.placement import pose_matrix, rotation
+from armreach_core.robot.placement import cross, pose_matrix, rotation
 from armreach_core.robot.urdf import ParsedURDF
 
 FloatArray = npt.NDArray[np.float64]
@@ -383,7 +383,7 @@ class ArmKinematics:
             origins = np.stack([origin for origin, _, _ in frames], axis=-2)
             axes = np.stack([axis for _, axis, _ in frames], axis=-2)
             prismatic = np.array([kind == "prismatic" for _, _, kind in frames])[:, None]
-            columns = np.where(prismatic, axes, _cross(axes, ee[..., None, :] - origins))
+            columns = np.where(prismatic, axes, cross(axes, ee[..., None, :] - origins))
             jac[..., : len(frames)] = np.swapaxes(columns, -1, -2)
         return jac
 
@@ -397,15 +397,3 @@ class ArmKinematics:
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r}, joints={list(self.joint_names)}, ee_link={self.ee_link!r})"
-
-
-def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
-    """``np.cross(a, b)`` over the last axis of 3-vectors, by the same products in the same order
-    (so to the last bit), without its axis handling, which costs more than the products here."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    out[..., 0] = a1 * b2 - a2 * b1
-    out[..., 1] = a2 * b0 - a0 * b2
-    out[..., 2] = a0 * b1 - a1 * b0
-    return out
