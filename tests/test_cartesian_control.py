@@ -182,6 +182,17 @@ def ee_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return folder / "run"
 
 
+def test_rollout_shows_the_straight_line_reference_under_ee_actions(tmp_path: Path) -> None:
+    """``armreach rollout --control ee``: the IK reference moves the end effector straight at the target,
+    three values an action; a task whose actions are its own refuses the flag before any folder."""
+    out = tmp_path / "ee"
+    assert main(["rollout", "--control", "ee", "--seed", "3", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["control"] == "ee" and summary["is_success"], summary
+    assert main(["rollout", "--task", "grasp", "--control", "ee", "--out", str(tmp_path / "grasp")]) == 2
+    assert not (tmp_path / "grasp").exists()
+
+
 @pytest.mark.training
 def test_control_is_refused_for_a_task_with_actions_of_its_own(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]

@@ -82,3 +82,14 @@ def check_corpus_flags(args: argparse.Namespace, urdf: str | None) -> None:
         raise ConfigError(f"--corpus checks the corpus arms, not {urdf}; drop one of them")
     if args.arms is not None and not args.corpus:
         raise ConfigError("--arms picks corpus arms; add --corpus")
+
+
+def check_control(task: str) -> None:
+    """``--control``: ``task`` has a ``control`` option (a task whose actions are its own has none)."""
+    import inspect
+
+    from armreach_core.plugins.lookup import task_spec
+
+    parameters = inspect.signature(task_spec(task).task_class()).parameters.values()
+    if not any(p.name == "control" or p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters):
+        raise ConfigError(f"--control: task {task!r} defines its own actions and has no control option; drop --control")

@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from armreach_core.cli.checks import check_out
+from armreach_core.cli.checks import check_control, check_out
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 
@@ -22,6 +22,13 @@ def add_parser(sub: Any) -> None:
         choices=("ik", "reference", "random"),
         default="ik",
         help="controller: ik, the task's reference (reach-around: the planner), random (default: ik)",
+    )
+    parser.add_argument(
+        "--control",
+        choices=("joints", "ee"),
+        default=None,
+        help="what an action commands: each joint's change (the paper's) or the end effector's displacement, "
+        "which the IK reference then moves in straight lines (default: joints)",
     )
     parser.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
     parser.add_argument("--max-steps", type=int, default=400, help="step limit (default: 400)")
@@ -43,13 +50,17 @@ def run(args: argparse.Namespace) -> int:
     from armreach_core.diagnostics.rollout import rollout, save_rollout
 
     check_out(args.out)
+    env_kwargs = robot_kwargs(args)
+    if args.control is not None:
+        check_control(args.task)
+        env_kwargs["control"] = args.control
     result = rollout(
         args.backend,
         policy=args.policy,
         seed=args.seed,
         max_steps=args.max_steps,
         viewer=args.viewer,
-        env_kwargs=robot_kwargs(args),
+        env_kwargs=env_kwargs,
         task=args.task,
         joint_log=args.joint_log is not None,
     )

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from armreach_core.cli.checks import check_backends, check_out, check_urdf
+from armreach_core.cli.checks import check_backends, check_control, check_out, check_urdf
 from armreach_core.cli.robot_args import DESCRIPTION_FLAGS, add_robot_arguments, description_kwargs
 from armreach_core.errors import ConfigError
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
@@ -140,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
         if args.until_success is not None:
             config = with_until_success(config, args.until_success)
         if args.control is not None:
-            _check_control(config.task)
+            check_control(config.task)
             config = config.with_settings(env={**config.settings.get("env", {}), "control": args.control})
         # before the run folder is made: a failing command leaves none behind
         check_backends([config.backend])
@@ -221,14 +221,3 @@ def check_device(device: str) -> None:
         torch.device(device)
     except (RuntimeError, ValueError):
         raise ConfigError(f"--device {device!r} is not a torch device; use auto, cpu or cuda[:N]") from None
-
-
-def _check_control(task: str) -> None:
-    """A :class:`ConfigError` when ``task`` has no ``control`` option (its actions are its own)."""
-    import inspect
-
-    from armreach_core.plugins.lookup import task_spec
-
-    parameters = inspect.signature(task_spec(task).task_class()).parameters.values()
-    if not any(p.name == "control" or p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters):
-        raise ConfigError(f"--control: task {task!r} defines its own actions and has no control option; drop --control")
