@@ -110,8 +110,9 @@ def rollout(
     }
     if "collision" in info:  # a task with obstacles
         summary["collision_steps"] = touches
-    if "control" in dict(env_kwargs or {}):  # what the actions commanded, when it was not the default
-        summary["control"] = dict(env_kwargs or {})["control"]
+    control = dict(env_kwargs or {}).get("control")
+    if control is not None:  # what the actions commanded, when the command said
+        summary["control"] = control
     log = None
     if joint_log:
         q_rows, qd_rows, targets = (np.array(column) for column in zip(*rows, strict=True))

@@ -209,14 +209,13 @@ class ReachAroundTask(ReachTask):
         The path is one of joint angles, so only joint actions follow it: under ``control="ee"`` a
         :class:`ConfigError` says so, before any step.
         """
-        from armreach_obstacles.follow import PathFollower
-
         if self.control != "joints":
             raise ConfigError(
                 f"the reach-around reference follows the planner's path of joint angles, which actions of "
                 f"control={self.control!r} (the end effector's displacement) cannot command; use control='joints' "
                 "(drop --control ee) for its demonstrations, imitation or `armreach rollout --policy reference`"
             )
+        from armreach_obstacles.follow import PathFollower
 
         return PathFollower(env, self, margin=self.reference_margin)
 
