@@ -64,11 +64,16 @@ def joint_targets(
     jac = robot.jacobian(q_arr)
     low, high = target_bounds(robot)
     damping = (DAMPING_PER_REACH * reach) ** 2 * np.eye(3)
-    dq = weight * (jac.T @ np.linalg.solve((jac * weight) @ jac.T + damping, dx))
+
+    def step(jac: FloatArray) -> FloatArray:  # the weighted damped-least-squares step
+        solved: FloatArray = weight * (jac.T @ np.linalg.solve((jac * weight) @ jac.T + damping, dx))
+        return solved
+
+    dq = step(jac)
     held = ((q_arr + dq > high) & (dq > 0)) | ((q_arr + dq < low) & (dq < 0))
     if held.any():
         jac[:, held] = 0.0
-        dq = weight * (jac.T @ np.linalg.solve((jac * weight) @ jac.T + damping, dx))
+        dq = step(jac)
         dq[held] = 0.0
     tool = slice(robot.arm_dof, None)  # a gripper's joints do not move the end effector: held at home
     dq[tool] = robot.home[tool] - q_arr[tool]
