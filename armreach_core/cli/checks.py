@@ -2,7 +2,8 @@
 
 Each failure raises an :class:`~armreach_core.errors.ArmReachError` whose message names the
 flag and the fix, so that ``armreach`` exits with status 2 and one line, and leaves no
-half-made output folder behind.
+half-made output folder behind. A flag that several commands share is declared here beside its
+check (``--control``).
 """
 
 from __future__ import annotations
@@ -82,6 +83,17 @@ def check_corpus_flags(args: argparse.Namespace, urdf: str | None) -> None:
         raise ConfigError(f"--corpus checks the corpus arms, not {urdf}; drop one of them")
     if args.arms is not None and not args.corpus:
         raise ConfigError("--arms picks corpus arms; add --corpus")
+
+
+def add_control_argument(parser: argparse.ArgumentParser, after: str) -> None:
+    """The ``--control`` flag of the commands that build an env (checked by :func:`check_control`);
+    ``after`` ends its help (what the command does with it, and its default)."""
+    parser.add_argument(
+        "--control",
+        choices=("joints", "ee"),
+        default=None,
+        help=f"what an action commands: each joint's change (the paper's) or the end effector's displacement{after}",
+    )
 
 
 def check_control(task: str) -> None:

@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from armreach_core.cli.checks import check_control, check_out
+from armreach_core.cli.checks import add_control_argument, check_control, check_out
 from armreach_core.cli.robot_args import add_robot_arguments, robot_kwargs
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
 
@@ -23,13 +23,7 @@ def add_parser(sub: Any) -> None:
         default="ik",
         help="controller: ik, the task's reference (reach-around: the planner), random (default: ik)",
     )
-    parser.add_argument(
-        "--control",
-        choices=("joints", "ee"),
-        default=None,
-        help="what an action commands: each joint's change (the paper's) or the end effector's displacement, "
-        "which the IK reference then moves in straight lines (default: joints)",
-    )
+    add_control_argument(parser, ", which the IK reference then moves in straight lines (default: joints)")
     parser.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
     parser.add_argument("--max-steps", type=int, default=400, help="step limit (default: 400)")
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: runs/rollout-<time>)")

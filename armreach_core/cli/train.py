@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from armreach_core.cli.checks import check_backends, check_control, check_out, check_urdf
+from armreach_core.cli.checks import add_control_argument, check_backends, check_control, check_out, check_urdf
 from armreach_core.cli.robot_args import DESCRIPTION_FLAGS, add_robot_arguments, description_kwargs
 from armreach_core.errors import ConfigError
 from armreach_core.plugins.defaults import DEFAULT_BACKEND, DEFAULT_TASK
@@ -50,13 +50,7 @@ def add_parser(sub: Any) -> None:
     parser.add_argument("--task", default=DEFAULT_TASK, help="registered task (default: %(default)s)")
     parser.add_argument("--backend", default=DEFAULT_BACKEND, help="physics backend (default: %(default)s)")
     parser.add_argument("--her", action="store_true", help="hindsight experience replay (off-policy algorithms)")
-    parser.add_argument(
-        "--control",
-        choices=("joints", "ee"),
-        default=None,
-        help="what an action commands: each joint's change (the paper's) or the end effector's displacement "
-        "(default: the preset's, else joints)",
-    )
+    add_control_argument(parser, " (default: the preset's, else joints)")
     parser.add_argument(
         "--physics", default=None, metavar="PROFILE", help="train on a fitted physics profile (armreach sysid)"
     )
