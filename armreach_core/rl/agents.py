@@ -200,6 +200,8 @@ def build_model(
         # uses a short last mini-batch, which is what the paper's setting means.
         warnings.filterwarnings("ignore", message=".*mini-batch size.*", category=UserWarning)
         model = cls(policy_name, env, **kwargs)
+    if settings.get("overlap"):  # acting while the learner updates (rl.overlap)
+        model.use_overlap(str(policy.get("activation", "relu")))  # type: ignore[attr-defined]
     if tb_dir is None:  # SB3 would otherwise make an empty /tmp/SB3-<time> folder at every learn()
         from stable_baselines3.common.logger import Logger
 

@@ -1,4 +1,4 @@
-"""SBX's SAC with its exploring action drawn in one compiled call: the same actions, sooner.
+"""SBX's SAC with its exploring action drawn in one compiled call, and able to act while it learns.
 
 To draw an action, SBX's SAC policy first splits its random key with ``jax.random.split``
 and unpacks the pair, three JAX operations dispatched one by one from Python, and then runs
@@ -7,7 +7,8 @@ the sample, at every env step. :class:`LeanSAC` splits the key inside the compil
 so one call returns the action and both new keys. The keys, and so the actions and the whole
 run, are SBX's own to the bit (``tests/test_lean_sac.py``). Deterministic actions, gSDE and
 dict observations take SBX's own path. Only the algorithm class differs: a saved model loads
-with ``sbx.SAC`` as with this class.
+with ``sbx.SAC`` as with this class. With ``overlap: true`` it acts on a numpy copy of its
+actor while the learner updates (:mod:`armreach_core.rl.overlap`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ import numpy as np
 from gymnasium import spaces
 from sbx import SAC
 
+from armreach_core.rl.overlap import Overlap
+
 
 @jax.jit
 def _split_and_sample(actor_state: Any, observations: Any, key: Any) -> tuple[Any, Any, Any]:
@@ -28,8 +31,11 @@ def _split_and_sample(actor_state: Any, observations: Any, key: Any) -> tuple[An
     return action, key, noise_key
 
 
-class LeanSAC(SAC):
-    """SBX's SAC whose exploring actions come from :func:`_split_and_sample`."""
+class LeanSAC(Overlap, SAC):  # type: ignore[misc]  # _train: see rl.overlap
+    """SBX's SAC whose exploring actions come from :func:`_split_and_sample`, or from the
+    acting copy while the learner works (:class:`~armreach_core.rl.overlap.Overlap`)."""
+
+    gaussian_actor = True
 
     def predict(
         self,
@@ -38,9 +44,12 @@ class LeanSAC(SAC):
         episode_start: np.ndarray | None = None,
         deterministic: bool = False,
     ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        overlapping = self.overlap_predict(observation, deterministic)
+        if overlapping is not None:
+            return overlapping, state
         policy = self.policy
         if deterministic or policy.use_sde or isinstance(observation, dict):
-            return super().predict(observation, state, episode_start, deterministic)
+            return SAC.predict(self, observation, state, episode_start, deterministic)
         observation, vectorized = policy.prepare_obs(observation)
         action, policy.key, policy.noise_key = _split_and_sample(policy.actor_state, observation, policy.key)
         # what SBX's BaseJaxPolicy.predict does with the sample

@@ -55,6 +55,8 @@ ARGUMENT_OF = {
     "demonstrations": "replay_buffer_class",
     "policy": "policy_kwargs",
 }
+#: Algorithms that can act while they learn (``overlap``, on learner sbx; rl.overlap).
+OVERLAPPING = ("sac", "td3", "ddpg")
 #: Preset keys that are not constructor arguments at all.
 NOT_ARGUMENTS = (
     "timesteps",
@@ -66,6 +68,7 @@ NOT_ARGUMENTS = (
     "until_success",
     "imitation",
     "vec_env",
+    "overlap",
 )
 #: Where a learner comes from, for the error that says what to install.
 INSTALL = {
@@ -107,6 +110,10 @@ def algo_class(algo: str, learner: str = LEGACY_LEARNER) -> type[BaseAlgorithm]:
         from armreach_core.rl.lean_sac import LeanSAC
 
         return LeanSAC
+    if learner == "sbx" and algo in ("td3", "ddpg"):  # able to act while they learn (rl.overlap)
+        from armreach_core.rl.overlap import LeanDDPG, LeanTD3
+
+        return LeanTD3 if algo == "td3" else LeanDDPG
     cls: type[BaseAlgorithm] = getattr(library, CLASS_NAMES[algo])
     return cls
 
@@ -115,6 +122,11 @@ def check_settings(algo: str, learner: str, settings: Mapping[str, Any]) -> None
     """ConfigError for a preset key the learner's ``algo`` does not take (SB3's SAC has no ``policy_delay``...)."""
     if learner == "sbx":
         configure_xla(int(settings.get("torch_threads", 0)) or 1)  # XLA reads its flags once, when JAX starts
+    if settings.get("overlap") and (learner != "sbx" or algo not in OVERLAPPING):
+        raise ConfigError(
+            f"overlap: only {', '.join(OVERLAPPING)} on learner 'sbx' act while they learn,"
+            f" not {algo} on {learner!r}; remove the key"
+        )
     accepted = inspect.signature(algo_class(algo, learner).__init__).parameters
     for key in settings:
         if key in NOT_ARGUMENTS:

@@ -263,6 +263,8 @@ for _name in OFF_POLICY:
         # the run's timesteps of reinforcement learning follow (0: none)
         "imitation": _section(IMITATION_SCHEMA),
         "timesteps": _num(int, 0),
+        # act while the learner updates, on the policy one training call behind (SBX; rl.overlap)
+        "overlap": _bool,
     }
 
 
