@@ -156,3 +156,10 @@ def test_the_any_arm_preset_acts_while_it_learns(algo: str, tmp_path: Any) -> No
         assert model._acting is not None  # its last actions came from the acting copy
     finally:
         env.close()
+
+
+def test_a_preset_that_overlaps_trains_on_sb3_when_the_command_asks_for_it() -> None:
+    from armreach_core.rl.config import resolve_config
+
+    assert "overlap" not in resolve_config(algo="sac", preset="fast", learner="sb3").settings
+    assert resolve_config(algo="sac", preset="fast", learner="sbx").settings["overlap"] is True

@@ -284,6 +284,8 @@ def resolve_config(
     if algo in RL_ALGOS:
         chosen = learner or settings.get("learner") or default_learner(algo)
         check_learner(chosen, algo)
+        if learner is not None and learner != "sbx":  # the preset's SBX agent acted while it learned; SB3's take turns
+            settings.pop("overlap", None)
         settings["learner"] = chosen
         check_settings(algo, chosen, settings)
         if "imitation" in settings and chosen != "sb3":  # the cloned actor is a PyTorch module (rl.imitation)
