@@ -17,7 +17,6 @@ from typing import Any
 
 import jax
 import numpy as np
-from gymnasium import spaces
 from sbx import SAC
 
 from armreach_core.rl.overlap import Overlap
@@ -44,21 +43,13 @@ class LeanSAC(Overlap, SAC):  # type: ignore[misc]  # _train: see rl.overlap
         episode_start: np.ndarray | None = None,
         deterministic: bool = False,
     ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
-        overlapping = self.overlap_predict(observation, deterministic)
-        if overlapping is not None:
-            return overlapping, state
         policy = self.policy
-        if deterministic or policy.use_sde or isinstance(observation, dict):
+        if self.sbx_acts(observation, deterministic):
             return SAC.predict(self, observation, state, episode_start, deterministic)
         observation, vectorized = policy.prepare_obs(observation)
-        action, policy.key, policy.noise_key = _split_and_sample(policy.actor_state, observation, policy.key)
-        # what SBX's BaseJaxPolicy.predict does with the sample
-        actions = np.array(action).reshape((-1, *self.action_space.shape))
-        assert isinstance(self.action_space, spaces.Box)
-        if policy.squash_output:
-            actions = policy.unscale_action(np.clip(actions, -1, 1))
+        if self._acting is not None:  # acting while the learner updates (rl.overlap)
+            sample = self._acting.act(np.asarray(observation))
         else:
-            actions = np.clip(actions, self.action_space.low, self.action_space.high)
-        if not vectorized:
-            actions = actions.squeeze(axis=0)
-        return actions, state
+            action, policy.key, policy.noise_key = _split_and_sample(policy.actor_state, observation, policy.key)
+            sample = np.array(action)
+        return self.as_sbx_action(sample, vectorized), state

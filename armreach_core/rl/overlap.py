@@ -122,13 +122,17 @@ class Overlap:
         self._losses = losses
         return (*states, shown)
 
-    def overlap_predict(self, observation: Any, deterministic: bool) -> npt.NDArray[Any] | None:
-        """The action of the acting copy as SBX's ``predict`` returns it, or None where SBX's own path acts."""
-        if self._acting is None or deterministic or self.use_sde or isinstance(observation, dict):
-            return None
-        observation, vectorized = self.policy.prepare_obs(observation)
-        actions = self._acting.act(np.asarray(observation)).reshape((-1, *self.action_space.shape))
-        actions = np.asarray(self.policy.unscale_action(np.clip(actions, -1, 1)))  # SBX's actors squash theirs
+    def sbx_acts(self, observation: Any, deterministic: bool) -> bool:
+        """Whether SBX's own path acts: deterministic actions, gSDE, dict observations."""
+        return deterministic or self.use_sde or isinstance(observation, dict)
+
+    def as_sbx_action(self, sample: npt.NDArray[Any], vectorized: bool) -> npt.NDArray[Any]:
+        """What SBX's ``BaseJaxPolicy.predict`` does with an actor's sample in [-1, 1]."""
+        actions = np.asarray(sample).reshape((-1, *self.action_space.shape))
+        if self.policy.squash_output:
+            actions = np.asarray(self.policy.unscale_action(np.clip(actions, -1, 1)))
+        else:
+            actions = np.clip(actions, self.action_space.low, self.action_space.high)
         return actions if vectorized else actions.squeeze(axis=0)
 
     def predict(
@@ -138,10 +142,10 @@ class Overlap:
         episode_start: np.ndarray | None = None,
         deterministic: bool = False,
     ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
-        actions = self.overlap_predict(observation, deterministic)
-        if actions is not None:
-            return actions, state
-        return super().predict(observation, state, episode_start, deterministic)  # type: ignore[misc,no-any-return]
+        if self._acting is None or self.sbx_acts(observation, deterministic):
+            return super().predict(observation, state, episode_start, deterministic)  # type: ignore[misc,no-any-return]
+        observation, vectorized = self.policy.prepare_obs(observation)
+        return self.as_sbx_action(self._acting.act(np.asarray(observation)), vectorized), state
 
 
 class LeanTD3(Overlap, TD3):  # type: ignore[misc]  # _train: SBX's classmethod, overridden per instance
