@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from lxml import etree
 
+from armreach_core import URDFError
 from armreach_core.diagnostics.corpus import corpus_arm
 from armreach_core.diagnostics.parity import run_parity
 from armreach_core.plugins.builtin import AR6_HOME
@@ -60,6 +61,38 @@ def test_a_rigid_body_s_inertia_is_left_alone(tensor):
 @pytest.mark.parametrize("mass", [0.0, 1e-9])  # so101's gripper_frame_link says 1e-9 kg: a frame
 def test_a_massless_link_is_left_alone(mass):
     assert repaired(mass, np.zeros((3, 3))) is None
+
+
+#: TIAGo's antennas (example-robot-data): 1 mg, and a tensor with a negative principal moment.
+ANTENNA = '<inertia ixx="2.371e-08" ixy="6.119e-08" ixz="1.179e-08" iyy="2.833e-08" iyz="7.74e-09" izz="3.849e-08"/>'
+
+
+@pytest.mark.parametrize(("mass", "accepted"), [(1e-6, True), (1e-9, True), (2e-6, False), (1.0, False)])
+def test_a_placeholder_s_non_inertia_gets_the_ball_and_a_body_s_is_refused(tmp_path, ar6_urdf, mass, accepted, caplog):
+    """A link of at most a milligram with a tensor no body has is a frame Gazebo wanted weighed: it
+    is repaired (reported); on anything heavier the moments matter and the URDF is refused."""
+    inertial = f'<inertial><mass value="{mass!r}"/>{ANTENNA}</inertial>'
+    text = ar6_urdf.read_text()
+    start = text.index('<link name="tool0">')
+    text = text[:start] + f'<link name="tool0">{inertial}</link>' + text[text.index("</link>", start) + 7 :]
+    path = tmp_path / "antenna.urdf"
+    path.write_text(text)
+    if not accepted:
+        refused = r"link 'tool0' is not positive semi-definite \(principal moments -3\.53e-08"
+        with pytest.raises(URDFError, match=refused):
+            RobotModel(str(path))
+        return
+    with caplog.at_level(logging.WARNING, logger="armreach.robot"):
+        robot = RobotModel(str(path))
+    assert any("a placeholder of" in r.getMessage() and "'tool0'" in r.getMessage() for r in caplog.records)
+    fix = repaired(mass, np.array([[2.371e-08, 6.119e-08, 1.179e-08], [6.119e-08, 2.833e-08, 7.74e-09],
+                                   [1.179e-08, 7.74e-09, 3.849e-08]]))  # fmt: skip
+    assert fix is not None
+    np.testing.assert_allclose(fix[0], np.eye(3) * ball_moment(mass))
+    sent = etree.fromstring(simulation_urdf(robot, visuals=False))  # what both engines load
+    inertia = sent.find("link[@name='tool0']/inertial/inertia")
+    assert inertia is not None and float(inertia.get("ixx")) == pytest.approx(ball_moment(mass))
+    assert float(inertia.get("ixy")) == 0.0
 
 
 def test_the_engines_get_the_repair_and_the_model_keeps_the_urdf_s_numbers(caplog):

@@ -77,6 +77,7 @@ def _no_opt_in(monkeypatch):
         ("ros", "../meshes/tip.obj"),  # urdf/ and meshes/ siblings
         ("package.xml", "../../meshes/tip.obj"),  # package root marked by package.xml
         ("package.xml", "package://arm_description/meshes/tip.obj"),
+        ("ros", "package:///arm_description/meshes/tip.obj"),  # an empty host, as example-robot-data's TALOS
     ],
 )
 def test_meshes_inside_the_folder_or_package_load(tmp_path, layout, reference):

@@ -12,7 +12,8 @@ element, the attribute and the fix:
 * numbers are plain decimals (``-1.5``, ``2e-3``), as many as the attribute needs,
   finite, and at most :data:`MAX_MAGNITUDE` in size (metres, kilograms, radians);
 * masses, inertias' principal moments, damping and friction are not negative, and an
-  inertia tensor is positive semi-definite; geometry sizes are positive; a movable joint's
+  inertia tensor is positive semi-definite (but on a placeholder link of at most a milligram,
+  which is repaired); geometry sizes are positive; a movable joint's
   axis has a direction;
 * an ``<inertial>`` has both ``<mass>`` and ``<inertia>``; geometry has its sizes; a
   ``<dynamics>`` has damping or friction;
@@ -44,7 +45,7 @@ import numpy as np
 from lxml import etree
 
 from armreach_core.errors import URDFError
-from armreach_core.robot.inertia import INERTIA_KEYS, inertia_tensor, repairs
+from armreach_core.robot.inertia import INERTIA_KEYS, MASSLESS, inertia_tensor, is_inertia, repairs
 
 log = logging.getLogger("armreach.robot")
 
@@ -179,7 +180,7 @@ def _check_inertial(inertial: Element) -> None:
         missing = "<mass value=...>" if mass is None else "<inertia ixx=... izz=...>"
         raise URDFError(f"{_where(inertial)} has no {missing}; an <inertial> needs both <mass> and <inertia>")
     never_negative = "a mass is never negative: give the link's mass in kg"
-    _numbers(mass, "value", 1, required=True, minimum=0.0, fix=never_negative)
+    weight = _numbers(mass, "value", 1, required=True, minimum=0.0, fix=never_negative)
     values = {}
     for key in INERTIA_KEYS:
         number = _numbers(inertia, key, 1, required=True)
@@ -187,7 +188,8 @@ def _check_inertial(inertial: Element) -> None:
         values[key] = number[0]
     tensor = inertia_tensor(values)
     eigenvalues = np.linalg.eigvalsh(tensor)
-    if eigenvalues[0] < -1e-12 - 1e-9 * abs(eigenvalues[-1]):
+    assert weight is not None
+    if not is_inertia(eigenvalues) and weight[0] > MASSLESS:  # a placeholder's is repaired (robot.inertia)
         raise URDFError(
             f"<inertia> of {_where(inertial)} is not positive semi-definite (principal moments "
             f"{', '.join(f'{e:.3g}' for e in eigenvalues)} kg·m²); a rigid body's moments are >= 0: "

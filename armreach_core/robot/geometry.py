@@ -37,7 +37,7 @@ class _Geometry:
 
 
 @functools.lru_cache(maxsize=128)
-def _mesh_points(filename: str, scale: tuple[float, float, float]) -> FloatArray | None:
+def _mesh_points(filename: str, scale: tuple[float, float, float], thin: bool = True) -> FloatArray | None:
     import trimesh
 
     try:
@@ -46,14 +46,27 @@ def _mesh_points(filename: str, scale: tuple[float, float, float]) -> FloatArray
     except Exception as exc:  # a mesh trimesh cannot read: the link is checked by its frame alone
         log.warning("could not read collision mesh %s (%s); its link is checked at its frame only", filename, exc)
         return None
-    if len(vertices) > MESH_POINTS:
+    if thin and len(vertices) > MESH_POINTS:
         vertices = vertices[np.linspace(0, len(vertices) - 1, MESH_POINTS).astype(int)]
     scaled: FloatArray = vertices * np.asarray(scale, dtype=np.float64)
     return scaled
 
 
-def _shape_points(geometry: Any) -> FloatArray | None:
-    """Points of a yourdfpy collision geometry in its own frame (``None``: nothing to check)."""
+@functools.lru_cache(maxsize=1)
+def _unit_ball_cover() -> FloatArray:
+    """Vertices of a polyhedron that holds the unit ball (an icosphere pushed out to touch it with its faces)."""
+    import trimesh
+
+    sphere: Any = trimesh.creation.icosphere(subdivisions=1)
+    inradius = float(np.min(np.abs(np.einsum("ij,ij->i", sphere.face_normals, sphere.triangles[:, 0]))))
+    vertices: FloatArray = np.asarray(sphere.vertices, dtype=np.float64) / inradius
+    return vertices
+
+
+def _shape_points(geometry: Any, enclosing: bool = False) -> FloatArray | None:
+    """Points of a yourdfpy collision geometry in its own frame (``None``: nothing to check); with
+    ``enclosing``, points whose convex hull holds the whole shape (a sphere's and a cylinder's hulls
+    pushed out, every vertex of a mesh's hull)."""
     if geometry is None:
         return None
     if geometry.box is not None:
@@ -61,26 +74,29 @@ def _shape_points(geometry: Any) -> FloatArray | None:
         return corners * (np.asarray(geometry.box.size, dtype=np.float64) / 2)
     if geometry.sphere is not None:
         r = float(geometry.sphere.radius)
-        return np.vstack([np.eye(3) * r, -np.eye(3) * r])
+        return _unit_ball_cover() * r if enclosing else np.vstack([np.eye(3) * r, -np.eye(3) * r])
     if geometry.cylinder is not None:
         r, length = float(geometry.cylinder.radius), float(geometry.cylinder.length)
+        r = r / math.cos(math.pi / RIM) if enclosing else r
         angles = np.linspace(0, 2 * math.pi, RIM, endpoint=False)
         rim = np.stack([r * np.cos(angles), r * np.sin(angles)], axis=1)
         return np.vstack([np.column_stack([rim, np.full(RIM, z)]) for z in (-length / 2, length / 2)])
     if geometry.mesh is not None:
         scale = np.broadcast_to(np.asarray(1.0 if geometry.mesh.scale is None else geometry.mesh.scale, float), 3)
-        return _mesh_points(str(geometry.mesh.filename), (float(scale[0]), float(scale[1]), float(scale[2])))
+        size = (float(scale[0]), float(scale[1]), float(scale[2]))
+        return _mesh_points(str(geometry.mesh.filename), size, not enclosing)
     return None
 
 
 @functools.lru_cache(maxsize=32)
-def _link_points(robot: ArmKinematics) -> dict[str, FloatArray]:
-    """Every link's collision points in its own frame, as the URDF gives them (links with collision geometry only)."""
+def _link_points(robot: ArmKinematics, enclosing: bool = False) -> dict[str, FloatArray]:
+    """Every link's collision points in its own frame, as the URDF gives them (links with collision geometry
+    only); with ``enclosing``, points whose hull holds each shape (:func:`_shape_points`)."""
     points: dict[str, FloatArray] = {}
     for link in robot.parsed.model.robot.links:
         clouds = []
         for collision in link.collisions:
-            local = _shape_points(collision.geometry)
+            local = _shape_points(collision.geometry, enclosing)
             if local is None:
                 continue
             transform = np.eye(4) if collision.origin is None else np.asarray(collision.origin, dtype=np.float64)
@@ -238,8 +254,24 @@ def _overlap(a: tuple[FloatArray, FloatArray, FloatArray], b: tuple[FloatArray, 
     return True
 
 
-def self_collisions(robot: ArmKinematics, q: npt.ArrayLike) -> list[tuple[str, str]]:
-    """Pairs of links that are not neighbours whose collision boxes overlap at ``q`` (one configuration)."""
+def _separable(a: FloatArray, b: FloatArray) -> bool:
+    """Whether a plane separates the points ``a`` (k, 3) from ``b`` (m, 3), so that their convex hulls do
+    not meet: a linear program for ``w·p + c <= -1`` on ``a`` and ``>= 1`` on ``b``."""
+    from scipy.optimize import linprog
+
+    rows = np.vstack([np.hstack([a, np.ones((len(a), 1))]), -np.hstack([b, np.ones((len(b), 1))])])
+    result = linprog(np.zeros(4), A_ub=rows, b_ub=-np.ones(len(rows)), bounds=[(None, None)] * 4, method="highs")
+    return bool(result.status == 0)
+
+
+def self_collisions(robot: ArmKinematics, q: npt.ArrayLike, *, hulls: bool = False) -> list[tuple[str, str]]:
+    """Pairs of links that are not neighbours whose collision boxes overlap at ``q`` (one configuration).
+
+    A box (each link's collision points' bounds in its frame) holds the link with room to spare;
+    with ``hulls``, a pair counts only if the convex hulls of their shapes (spheres and cylinders
+    taken by polyhedra that hold them) meet too, which is what the engines collide (a torso's box
+    covers the space beside it where an arm hangs).
+    """
     geometry = _geometry(robot)
     frames = robot.link_transforms(np.asarray(q, dtype=np.float64))
     boxes = _boxes(geometry)
@@ -248,13 +280,23 @@ def self_collisions(robot: ArmKinematics, q: npt.ArrayLike) -> list[tuple[str, s
         transform = frames[link]
         placed[link] = (transform[:3, :3] @ centre + transform[:3, 3], transform[:3, :3], half)
     links = sorted(placed)
+
+    def _placed(link: str) -> FloatArray:
+        transform = frames[link]
+        points: FloatArray = _link_points(robot, True)[link] @ transform[:3, :3].T + transform[:3, 3]
+        return points
+
+    # Only boxes whose bounding spheres meet can overlap: a robot of 90 links has 4,000 pairs.
+    centres = np.array([placed[link][0] for link in links]).reshape(-1, 3)
+    radii = np.array([float(np.linalg.norm(placed[link][2])) for link in links])
+    near = np.linalg.norm(centres[:, None, :] - centres[None, :, :], axis=-1) <= radii[:, None] + radii[None, :]
     hits = []
-    for i, a in enumerate(links):
-        for b in links[i + 1 :]:
-            if (a, b) in geometry.neighbours:
-                continue
-            if _overlap(placed[a], placed[b]):
-                hits.append((a, b))
+    for i, j in zip(*np.nonzero(np.triu(near, k=1)), strict=True):  # row by row, as sorted
+        a, b = links[i], links[j]
+        if (a, b) in geometry.neighbours:
+            continue
+        if _overlap(placed[a], placed[b]) and not (hulls and _separable(*(_placed(a), _placed(b)))):
+            hits.append((a, b))
     return hits
 
 

@@ -1,7 +1,9 @@
 """Where an arm starts: a home pose chosen from the URDF model alone, and checks of a given one.
 
 The default home is the first configuration, in a deterministic order, that keeps every
-link's collision geometry above the ground, has no two non-neighbouring links overlapping,
+link's collision geometry above the ground, has no two non-neighbouring links overlapping
+(by the boxes around their collision geometry; by its convex hulls, as the engines collide
+it, where the boxes overlap in every candidate),
 leaves the end effector away from singularities and is holdable against gravity with the
 URDF's effort limits (:func:`armreach_core.robot.statics.holdable`; skipped for an arm that holds
 none of the candidates). The URDF's zero pose (moved inside
@@ -93,19 +95,24 @@ def default_home(robot: ArmKinematics) -> FloatArray:
     # Candidates come in rings: the zero pose, then DIRECTIONS per radius. The first ring with
     # a qualifying pose wins; within it the most dexterous pose without self-collision.
     rings = [range(0, 1)] + [range(1 + i * DIRECTIONS, 1 + (i + 1) * DIRECTIONS) for i in range(len(RADII))]
+    # Links apart by their boxes leave room between them; where every qualifying pose has two
+    # links' boxes overlapping (an arm hanging beside a torso), their collision hulls decide.
     blocked: list[tuple[str, str]] = []  # the overlapping pairs of every qualifying pose, for the error
-    for ring in rings:
-        ok = [i for i in ring if fine[i]]
-        for i in sorted(ok, key=lambda k: -dexterity[k]):
-            hits = self_collisions(robot, batch[i])
-            blocked += hits
-            if not hits:
-                reason = "the URDF's zero pose" if i == 0 else "the nearest pose to the zero pose that qualifies"
-                log.info(
-                    "home of %r: %s (lowest link %.3f m above the ground, dexterity %.3g of %.3g)",
-                    robot.name, reason, lowest[i], dexterity[i], typical,
-                )  # fmt: skip
-                return np.asarray(batch[i], dtype=np.float64)
+    for hulls in (False, True):
+        blocked.clear()
+        for ring in rings:
+            ok = [i for i in ring if fine[i]]
+            for i in sorted(ok, key=lambda k: -dexterity[k]):
+                hits = self_collisions(robot, batch[i], hulls=hulls)
+                blocked += hits
+                if not hits:
+                    reason = "the URDF's zero pose" if i == 0 else "the nearest pose to the zero pose that qualifies"
+                    apart = "collision hulls (every candidate has links whose boxes overlap)" if hulls else "boxes"
+                    log.info(
+                        "home of %r: %s (lowest link %.3f m above the ground, dexterity %.3g of %.3g, links apart "
+                        "by their %s)", robot.name, reason, lowest[i], dexterity[i], typical, apart,
+                    )  # fmt: skip
+                    return np.asarray(batch[i], dtype=np.float64)
     best = int(np.argmax(lowest))
     if lowest[best] < GROUND_CLEARANCE:
         lift = round(GROUND_CLEARANCE - float(lowest[best]) + 0.05, 2)
@@ -117,7 +124,7 @@ def default_home(robot: ArmKinematics) -> FloatArray:
         )
     why = (
         f": all {int(fine.sum())} poses clear of the ground and away from singularities have links overlapping, "
-        f"most often {' and '.join(map(repr, Counter(blocked).most_common(1)[0][0]))} (by their collision boxes)"
+        f"most often {' and '.join(map(repr, Counter(blocked).most_common(1)[0][0]))} (by their collision hulls)"
         if blocked
         else f": none of the {len(batch)} poses tried is away from singularities"
     )
@@ -145,7 +152,7 @@ def describe(robot: ArmKinematics, q: npt.ArrayLike) -> dict[str, Any]:
     lowest = float(lowest_points(robot, values[None, :])[0])
     return {
         "lowest_link_m": lowest,
-        "self_collisions": self_collisions(robot, values),
+        "self_collisions": self_collisions(robot, values, hulls=True),
         "dexterity": float(_dexterity(robot, values[None, :])[0]),
         "path": str(Path(robot.urdf_path)),
     }

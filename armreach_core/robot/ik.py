@@ -128,8 +128,8 @@ class IKPolicy:
     With ``restarts`` > 0 it first plans: when the target changes it solves the inverse
     kinematics (from the current angles, then from home and ``restarts`` seeded random
     configurations, :func:`solve_with_restarts`, preferring a solution whose straight
-    joint-space path from here the motors hold against gravity and keeps every link above the
-    ground, :data:`PATH_POINTS` poses along it) and moves all joints together in joint
+    joint-space path from here the motors hold against gravity, unless they do not hold its home,
+    and keeps every link above the ground, :data:`PATH_POINTS` poses along it) and moves all joints together in joint
     space towards that solution, switching to damped least squares within ``near`` metres of
     the target. This reaches targets where the plain closed loop stops in a local minimum
     or at a joint limit.
@@ -165,6 +165,9 @@ class IKPolicy:
         self.near = near
         self._target: FloatArray | None = None
         self._goal: FloatArray | None = None
+        # An arm whose motors do not hold its home against gravity (PR2's, built to lean on springs
+        # the URDF leaves out) got its home with gravity ignored, and its plans are taken so too.
+        self._weak = not bool(holdable(robot, robot.home))
 
     @classmethod
     def for_env(cls, env: Stepping, **options: Any) -> IKPolicy:
@@ -179,7 +182,7 @@ class IKPolicy:
 
         path = start + np.linspace(0.0, 1.0, PATH_POINTS)[:, None] * (goal - start)
         clear = all(bool((z >= min(0.0, float(z[0]))).all()) for z in link_heights(self.robot, path).values())
-        return clear and bool(holdable(self.robot, path).all())
+        return clear and (self._weak or bool(holdable(self.robot, path).all()))
 
     def act(self, q: npt.ArrayLike, target: npt.ArrayLike) -> npt.NDArray[np.float32]:
         q_arr, goal = np.asarray(q, dtype=np.float64), np.asarray(target, dtype=np.float64)

@@ -17,6 +17,10 @@ engines load is repaired here:
   largest principal axis) exceeds the sum of all the robot's joint offsets, so that its mass
   would lie beyond any part of the robot (Trossen's 1 g frames with 1e-3 kg·m² each: 1 m
   on a 0.4-0.8 m arm), is a placeholder: it gets the steel ball's inertia too.
+* **A placeholder's non-inertia.** A link of at most :data:`MASSLESS` (a milligram: a frame
+  that Gazebo wanted to have a mass) whose tensor is not positive semi-definite (TIAGo's
+  antennas: 1 mg with a negative moment of 3.5e-8 kg·m²) gets the steel ball's inertia; on a
+  heavier link that is refused (:mod:`armreach_core.robot.checks`), as its moments matter.
 * **Triangle inequality broken** (one principal moment larger than the other two
   together): every moment becomes their mean, as MuJoCo's ``balanceinertia`` does.
 
@@ -49,6 +53,11 @@ INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 _PLACES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
+def is_inertia(moments: np.ndarray[Any, Any]) -> bool:
+    """Whether principal ``moments`` (ascending) are a tensor's that is positive semi-definite, to rounding."""
+    return bool(moments[0] >= -1e-12 - 1e-9 * abs(moments[-1]))
+
+
 def inertia_tensor(values: Mapping[str, float]) -> np.ndarray[Any, Any]:
     """The symmetric 3x3 tensor of an ``<inertia>``'s six values, by :data:`INERTIA_KEYS`."""
     v = values
@@ -66,10 +75,13 @@ def repaired(
 ) -> tuple[np.ndarray[Any, Any], str] | None:
     """The tensor an engine should get for a link of ``mass`` whose inertia is ``tensor``, on a
     robot whose joint offsets add up to ``span`` m, and why; ``None`` when it is fine as it is."""
-    if mass < MASSLESS:
-        return None
     moments = np.linalg.eigvalsh(tensor)
     floor = ball_moment(mass)
+    if mass <= MASSLESS and not is_inertia(moments):
+        shown = ", ".join(f"{m:.3g}" for m in moments)
+        return np.eye(3) * floor, f"a placeholder of {mass:.3g} kg with principal moments {shown}: given a steel ball's"
+    if mass < MASSLESS:
+        return None
     if float(moments.sum()) < 3.0 * floor:
         why = f"more compact than a steel ball of {mass:.4g} kg: given that ball's {floor:.3g} kg·m²"
         return np.eye(3) * floor, why

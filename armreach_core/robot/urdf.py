@@ -114,7 +114,7 @@ def _find(
     candidates: list[Path] = []
     package: str | None = None
     if filename.startswith("package://"):
-        rest = filename[len("package://") :]
+        rest = filename[len("package://") :].lstrip("/")  # package:///NAME/...: NAME/... (pinocchio reads it so)
         package, _, pkg_relative = rest.partition("/")
         folder = packages.find(package)
         if folder is not None and pkg_relative:
@@ -151,7 +151,8 @@ def resolve_mesh_path(
 ) -> Path:
     """Map a mesh reference of a URDF to the file it names.
 
-    ``package://PKG/rest`` is looked up as ``rest`` in the folder of package ``PKG``
+    ``package://PKG/rest`` (or ``package:///PKG/rest``, as example-robot-data's full TALOS writes
+    it) is looked up as ``rest`` in the folder of package ``PKG``
     (:meth:`~armreach_core.robot.packages.Packages.find`), then as ``PKG/rest`` in the URDF's
     folder and each of its parents, then as ``rest`` in the URDF's folder and its package
     root; ``file://`` is stripped; relative paths are relative to the URDF's folder.
@@ -166,7 +167,9 @@ def resolve_mesh_path(
     packages = packages or Packages.of(urdf_dir)
     found, candidates = _find(filename, urdf_dir, allow_external, "mesh", packages)
     if found is None:
-        package = filename[len("package://") :].partition("/")[0] if filename.startswith("package://") else None
+        package = (
+            filename[len("package://") :].lstrip("/").partition("/")[0] if filename.startswith("package://") else None
+        )
         fix = "ship the mesh beside the URDF or fix the path"
         if package is not None and packages.find(package) is None:
             fix = (

@@ -1,0 +1,69 @@
+"""Descriptions from public packages beyond the corpus, each once refused or slow for a reason of
+its own: a box test of self-collision, a placeholder's inertia, a ``package:///`` path, an arm
+its motors do not hold. (docs/arms.md, "Arms beyond the corpus", lists what every one gives.)
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from armreach_core.diagnostics.corpus import corpus_arm
+from armreach_core.robot.geometry import self_collisions
+from armreach_core.robot.ik import IKPolicy
+from armreach_core.robot.model import RobotModel
+
+
+def _robots() -> Path:
+    """example-robot-data's robots folder."""
+    ur3 = corpus_arm("ur3").path
+    if ur3 is None:
+        pytest.skip(f"example-robot-data is not installed: {corpus_arm('ur3').install}")
+    return Path(ur3).parents[2]
+
+
+def test_an_arm_beside_a_torso_gets_a_home_where_the_hulls_are_apart(caplog):
+    """Baxter's upper arm hangs beside its torso: their boxes overlap in every pose near the zero
+    pose (it was refused for that); their hulls, which the engines collide, do not at the home."""
+    with caplog.at_level(logging.INFO, logger="armreach.home"):
+        robot = RobotModel(str(_robots() / "baxter_description/urdf/baxter.urdf"), ee_link="left_gripper_base_link")
+    assert robot.dof == 7
+    assert self_collisions(robot, robot.home, hulls=True) == []
+    assert ("left_upper_elbow", "torso") in self_collisions(robot, robot.home)  # boxes alone would refuse it
+    assert any("links apart by their collision hulls" in r.getMessage() for r in caplog.records)
+
+
+@pytest.mark.slow
+def test_a_placeholder_antenna_no_longer_refuses_a_mobile_manipulator(caplog):
+    """TIAGo's antennas weigh 1 mg with a tensor no body has: repaired and reported, the arm loads."""
+    with caplog.at_level(logging.WARNING, logger="armreach.robot"):
+        robot = RobotModel(str(_robots() / "tiago_description/robots/tiago.urdf"), ee_link="arm_tool_link")
+    assert robot.joint_names[0] == "torso_lift_joint" and robot.dof == 8
+    assert any("'base_antenna_left_link'" in r.getMessage() and "placeholder" in r.getMessage() for r in caplog.records)
+
+
+@pytest.mark.slow
+def test_meshes_named_package_with_an_empty_host_are_found():
+    """The full TALOS writes ``package:///example-robot-data/robots/talos_data/meshes/...``."""
+    urdf = _robots() / "talos_data/robots/talos_full_v2.urdf"
+    assert b"package:///example-robot-data/" in urdf.read_bytes()
+    robot = RobotModel(str(urdf), ee_link="gripper_left_base_link")
+    assert b"package://" not in robot.parsed.resolved_xml and robot.dof == 9
+
+
+@pytest.mark.slow
+def test_the_ik_reference_plans_for_an_arm_its_motors_do_not_hold():
+    """PR2's arm leans on springs its URDF leaves out: no pose near its zero pose is holdable, so its
+    home was chosen ignoring gravity, and the reference's plans are taken so too (refusing every plan,
+    it ran 258 solves per target: `armreach robot` took 595 s on it, now 34 s)."""
+    robot = RobotModel(str(_robots() / "pr2_description/urdf/pr2.urdf"), ee_link="r_gripper_palm_link")
+    policy = IKPolicy(robot, 0.05, restarts=16)
+    target = robot.forward_kinematics(robot.clip(robot.home + 0.3))
+    start = time.perf_counter()
+    action = policy.act(robot.home, target)
+    assert time.perf_counter() - start < 0.5  # measured 0.004 s; refusing every plan, 2.2 s
+    assert np.abs(action).max() > 0.5  # it moves towards the plan
