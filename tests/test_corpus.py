@@ -29,8 +29,16 @@ from tests.conftest import BACKENDS
 #: mesh cache; the others take under 2 s each, about 13 s together).
 SLOW = {
     "kinova-jaco", "z1", "so101", "panda", "ur10", "kuka-kr16", "kuka-kr210", "abb-irb140", "vega-1u-left", "kuka-kr6",
-    "widowx-250s", "puma560", "stretch-re2",
+    "widowx-250s", "puma560", "stretch-re2", "kuka-kr120", "baxter-left", "tiago-arm",
 }  # fmt: skip
+#: TIAGo's five-finger hand: 36 joints, every one held.
+TIAGO_HAND = (
+    "hand_thumb_joint", "hand_index_joint", "hand_mrl_joint",
+    *(f"hand_{f}_abd_joint" for f in ("thumb", "index", "middle", "ring", "little")),
+    *(f"hand_{f}_{kind}_{i}_joint" for i in (1, 2) for kind in ("virtual", "flex")
+      for f in ("thumb", "index", "middle", "ring", "little")),
+    *(f"hand_{f}_{kind}_3_joint" for kind in ("virtual", "flex") for f in ("index", "middle", "ring", "little")),
+)  # fmt: skip
 #: What the rules of armreach_core.robot.anatomy give: (end effector, gripper joints).
 EXPECTED = {
     "ur3": ("tool0", ()),
@@ -59,6 +67,9 @@ EXPECTED = {
     "ur5e": ("tool0", ()),
     "stretch-re2": ("link_grasp_center", ("joint_gripper_finger_left", "joint_gripper_finger_right")),
     "finger-edu": ("finger_tip_link", ()),
+    "kuka-kr120": ("tool0", ()),
+    "baxter-left": ("left_gripper_base_link", ("l_gripper_l_finger_joint", "l_gripper_r_finger_joint")),
+    "tiago-arm": ("arm_tool_link", TIAGO_HAND),
 }
 #: Actuated joints: the arm's own, as its maker builds it; TALOS's description starts after its shoulder joint.
 DOF = {
@@ -88,6 +99,9 @@ DOF = {
     "ur5e": 6,
     "stretch-re2": 6,
     "finger-edu": 3,
+    "kuka-kr120": 6,
+    "baxter-left": 7,
+    "tiago-arm": 8,
 }
 #: Arms whose held joints are read from the engines: a jaw, mimic fingers, a gripper below a fixed stator.
 HELD = ("so100", "franka-panda", "z1")

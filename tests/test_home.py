@@ -29,8 +29,11 @@ def _load(arm):
     return build_robot(arm.spec())
 
 
-#: Corpus arms added with the xacro and glTF descriptions: their checks take 5-20 s each.
-LARGE = ("kuka-kr16", "kuka-kr210", "abb-irb140", "vega-1u-left", "stretch-re2")
+#: Corpus arms added with the xacro and glTF descriptions, and the KR120, Baxter and TIAGo: their
+#: checks take 5-20 s each.
+LARGE = (
+    "kuka-kr16", "kuka-kr210", "abb-irb140", "vega-1u-left", "stretch-re2", "kuka-kr120", "baxter-left", "tiago-arm",
+)  # fmt: skip
 
 
 def _home_arms():

@@ -4,7 +4,8 @@ One list, one line per arm. The descriptions come from package registries, with 
 meshes, as published: ``example-robot-data`` (PyPI), ``pybullet_data`` (installed with
 PyBullet), ``rtb-data`` (PyPI, the Robotics Toolbox's data: ROS-Industrial KUKA and ABB
 xacro descriptions, STL/DAE meshes), ``dexmate-urdf`` (PyPI: glTF/GLB visual meshes) and
-``airo-models`` (PyPI: a UR5e written for Drake).
+``airo-models`` (PyPI: a UR5e written for Drake); ``example-robot-data`` also gives Baxter's and
+TIAGo's arms.
 ``make install`` installs them all. Nothing here is tuned to an arm: each line says where
 the description is, its format, and what a user must say about it: where the ROS packages
 it names live (``package_dirs``), which end is the arm's when a robot has several, and a
@@ -182,6 +183,32 @@ CORPUS: tuple[CorpusArm, ...] = (
     ),
     # a TriFinger robot's finger: a 3-joint arm whose every joint and link is named finger_...
     CorpusArm("finger-edu", "example-robot-data", "finger_edu_description/robots/finger_edu.urdf"),
+    # a 3.1 m industrial arm for 120 kg payloads, as ROS-Industrial ships it (xacro)
+    CorpusArm(
+        "kuka-kr120",
+        "rtb-data",
+        "kuka_description/kuka_kr120/urdf/kr120r2500pro.xacro",
+        "xacro, STL/DAE meshes",
+        (("kuka_kr120_support", "kuka_description/kuka_kr120"), ("kuka_resources", "kuka_description/kuka_resources")),
+    ),
+    # a two-armed robot whose upper arms hang beside its torso (their collision boxes overlap it near
+    # every pose), its second arm and head held; its left gripper is the arm's end
+    CorpusArm(
+        "baxter-left",
+        "example-robot-data",
+        "baxter_description/urdf/baxter.urdf",
+        "URDF, DAE meshes",
+        ee_link="left_gripper_base_link",
+    ),
+    # a mobile manipulator: a torso lift and a 7-joint arm with a five-finger hand on a wheeled base;
+    # its antennas are 1 mg placeholders whose inertia no body has
+    CorpusArm(
+        "tiago-arm",
+        "example-robot-data",
+        "tiago_description/robots/tiago.urdf",
+        "URDF, STL/DAE meshes, a hand of 20 joints",
+        ee_link="arm_tool_link",
+    ),
 )
 
 
