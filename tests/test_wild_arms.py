@@ -1,6 +1,7 @@
-"""Descriptions from public packages beyond the corpus, each once refused or slow for a reason of
-its own: a box test of self-collision, a placeholder's inertia, a ``package:///`` path, an arm
-its motors do not hold. (docs/arms.md, "Arms beyond the corpus", lists what every one gives.)
+"""Descriptions from example-robot-data, each once refused or slow for a reason of its own: a box
+test of self-collision, a placeholder's inertia, a ``package:///`` path, an arm its motors do not
+hold. Baxter's and TIAGo's arms have since joined the corpus (whose tests run the contract on them);
+these tests pin the reason each loads. docs/arms.md ("Arms tried outside the corpus") lists them all.
 """
 
 from __future__ import annotations

@@ -206,7 +206,7 @@ CORPUS: tuple[CorpusArm, ...] = (
         "tiago-arm",
         "example-robot-data",
         "tiago_description/robots/tiago.urdf",
-        "URDF, STL/DAE meshes, a hand of 20 joints",
+        "URDF, STL/DAE meshes, a hand of 36 joints",
         ee_link="arm_tool_link",
     ),
 )

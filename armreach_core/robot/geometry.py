@@ -295,7 +295,7 @@ def self_collisions(robot: ArmKinematics, q: npt.ArrayLike, *, hulls: bool = Fal
         a, b = links[i], links[j]
         if (a, b) in geometry.neighbours:
             continue
-        if _overlap(placed[a], placed[b]) and not (hulls and _separable(*(_placed(a), _placed(b)))):
+        if _overlap(placed[a], placed[b]) and not (hulls and _separable(_placed(a), _placed(b))):
             hits.append((a, b))
     return hits
 

@@ -2,7 +2,7 @@
 
 The default home is the first configuration, in a deterministic order, that keeps every
 link's collision geometry above the ground, has no two non-neighbouring links overlapping
-(by the boxes around their collision geometry; by its convex hulls, as the engines collide
+(by the boxes around their collision geometry; by their convex hulls, as the engines collide
 it, where the boxes overlap in every candidate),
 leaves the end effector away from singularities and is holdable against gravity with the
 URDF's effort limits (:func:`armreach_core.robot.statics.holdable`; skipped for an arm that holds
