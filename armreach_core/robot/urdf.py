@@ -47,6 +47,25 @@ ALLOW_EXTERNAL_ENV = "ARMREACH_ALLOW_EXTERNAL_MESHES"
 
 _DTD_PATTERN = re.compile(rb"<!\s*(DOCTYPE|ENTITY)", re.IGNORECASE)
 _ROBOT_TAG = re.compile(rb"<robot(?=[\s/>])")
+#: An XML declaration and the version it gives.
+_DECLARATION = re.compile(rb"""<\?xml\s+version\s*=\s*(["'])([^"']*)\1""")
+
+
+def _lenient(data: bytes) -> bytes:
+    """``data`` with what PyBullet's XML reader takes and libxml2 refuses made plain XML, as
+    pybullet_data's own descriptions need: blank lines before the XML declaration, a declared
+    version other than 1.0 or 1.1 (``<?xml version="0.0" ?>``), NUL bytes after the last tag."""
+    body = data.rstrip(b"\x00")
+    if b"\x00" in body:  # a two-byte encoding (UTF-16): the parser reads it as it is
+        return data
+    if body.lstrip().startswith(b"<?xml"):
+        body = body.lstrip()
+        match = _DECLARATION.match(body)
+        if match is not None and match.group(2) not in (b"1.0", b"1.1"):
+            body = body[: match.start(2)] + b"1.0" + body[match.end(2) :]
+    return body
+
+
 #: Namespace given to a prefix a URDF uses without declaring it, so that its elements and
 #: attributes can be told apart and dropped.
 UNDECLARED_NAMESPACE = "urn:armreach:undeclared:"
@@ -305,6 +324,7 @@ def read_urdf(
         data = handle.read(MAX_URDF_BYTES + 1)
     if len(data) > MAX_URDF_BYTES:
         raise URDFError(f"URDF file {str(urdf_path)!r} grew while being read, {too_big}")
+    data = _lenient(data)
     if _DTD_PATTERN.search(data):
         raise _dtd_error(urdf_path)
     urdf_dir = urdf_path.resolve().parent
