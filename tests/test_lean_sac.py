@@ -73,6 +73,7 @@ def test_the_numpy_actors_are_sbxs_actors() -> None:
     from armreach_core.rl.overlap import NumpyActor
 
     model = _trained(LeanSAC)
+    model.env.observation_space.seed(0)
     obs = np.stack([model.env.observation_space.sample() for _ in range(16)])
     actor = NumpyActor(model.policy.actor_state.params, "relu", True, np.random.default_rng(0))
     dist = model.policy.actor_state.apply_fn(model.policy.actor_state.params, obs).distribution
@@ -80,7 +81,7 @@ def test_the_numpy_actors_are_sbxs_actors() -> None:
     np.testing.assert_allclose(mean, np.asarray(dist.mean()), rtol=1e-5, atol=1e-5)
     np.testing.assert_allclose(std, np.asarray(dist.stddev()), rtol=1e-5, atol=1e-6)
     sample = actor.act(obs)
-    assert sample.shape == mean.shape and np.all(np.abs(sample) < 1)
+    assert sample.shape == mean.shape and np.all(np.abs(sample) <= 1)  # tanh: float32 rounds its tails to 1
     assert not np.allclose(sample, np.tanh(mean))  # noise drawn
 
     td3 = _trained(TD3, steps=60)
