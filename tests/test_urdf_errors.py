@@ -40,22 +40,26 @@ def test_malformed_xml(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("before", "after"),
+    "before",
     [
-        ('<?xml version="0.0" ?>\n', ""),  # pybullet_data's sphere2.urdf, plane.urdf, minitaur.urdf, ...
-        ('\n\n<?xml version="1.0" ?>\n', ""),  # biped2d_pybullet.urdf
-        ("", "\x00"),  # humanoid.urdf
+        '<?xml version="0.0" ?>\n',  # pybullet_data's sphere2.urdf, plane.urdf, minitaur.urdf, ...
+        '\n\n<?xml version="1.0" ?>\n',  # biped2d_pybullet.urdf
     ],
 )
-def test_what_pybullet_reads_past_is_read_past_and_markup_errors_still_refused(tmp_path, ar6_urdf, before, after):
+def test_what_pybullet_reads_past_is_read_past_and_markup_errors_still_refused(tmp_path, ar6_urdf, before):
     body = ar6_urdf.read_text()
     body = body[body.index("<robot") :]
     path = tmp_path / "quirk.urdf"
-    path.write_bytes((before + body + after).encode())
+    path.write_bytes((before + body).encode())
     assert RobotModel(path).joint_names == RobotModel(ar6_urdf).joint_names
-    path.write_bytes((before + body.replace("</robot>", "") + after).encode())
-    with pytest.raises(URDFError, match="not well-formed"):
-        RobotModel(path)
+    for broken in (
+        before + body.replace("</robot>", ""),
+        before + body + "\x00",  # a NUL is no XML (pybullet_data's humanoid.urdf ends with one)
+        before.replace('version="', 'version="\x01') + body,  # a control byte in the version
+    ):
+        path.write_bytes(broken.encode())
+        with pytest.raises(URDFError, match="not well-formed"):
+            RobotModel(path)
 
 
 def test_no_movable_joint(tmp_path):

@@ -48,21 +48,19 @@ ALLOW_EXTERNAL_ENV = "ARMREACH_ALLOW_EXTERNAL_MESHES"
 _DTD_PATTERN = re.compile(rb"<!\s*(DOCTYPE|ENTITY)", re.IGNORECASE)
 _ROBOT_TAG = re.compile(rb"<robot(?=[\s/>])")
 #: An XML declaration and the version it gives.
-_DECLARATION = re.compile(rb"""<\?xml\s+version\s*=\s*(["'])([^"']*)\1""")
+_DECLARATION = re.compile(rb"""<\?xml\s+version\s*=\s*(["'])([0-9]+\.[0-9]+)\1""")
 
 
 def _lenient(data: bytes) -> bytes:
     """``data`` with what PyBullet's XML reader takes and libxml2 refuses made plain XML, as
-    pybullet_data's own descriptions need: blank lines before the XML declaration, a declared
-    version other than 1.0 or 1.1 (``<?xml version="0.0" ?>``), NUL bytes after the last tag."""
-    body = data.rstrip(b"\x00")
-    if b"\x00" in body:  # a two-byte encoding (UTF-16): the parser reads it as it is
+    pybullet_data's own descriptions need: blank lines before the XML declaration, and a declared
+    version other than 1.0 or 1.1 (``<?xml version="0.0" ?>``). Anything else stays refused."""
+    body = data.lstrip(b" \t\r\n")
+    if not body.startswith(b"<?xml"):
         return data
-    if body.lstrip().startswith(b"<?xml"):
-        body = body.lstrip()
-        match = _DECLARATION.match(body)
-        if match is not None and match.group(2) not in (b"1.0", b"1.1"):
-            body = body[: match.start(2)] + b"1.0" + body[match.end(2) :]
+    match = _DECLARATION.match(body)
+    if match is not None and match.group(2) not in (b"1.0", b"1.1"):
+        body = body[: match.start(2)] + b"1.0" + body[match.end(2) :]
     return body
 
 
