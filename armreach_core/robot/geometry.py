@@ -37,14 +37,21 @@ class _Geometry:
 
 
 @functools.lru_cache(maxsize=128)
-def _mesh_points(filename: str, scale: tuple[float, float, float], thin: bool = True) -> FloatArray | None:
+def _mesh_hull(filename: str) -> FloatArray | None:
+    """The vertices of a mesh file's convex hull, read once however many scales and thinnings ask."""
     import trimesh
 
     try:
         mesh: Any = trimesh.load(filename, force="mesh")
-        vertices: FloatArray = np.asarray(mesh.convex_hull.vertices, dtype=np.float64)
+        return np.asarray(mesh.convex_hull.vertices, dtype=np.float64)
     except Exception as exc:  # a mesh trimesh cannot read: the link is checked by its frame alone
         log.warning("could not read collision mesh %s (%s); its link is checked at its frame only", filename, exc)
+        return None
+
+
+def _mesh_points(filename: str, scale: tuple[float, float, float], thin: bool = True) -> FloatArray | None:
+    vertices = _mesh_hull(filename)
+    if vertices is None:
         return None
     if thin and len(vertices) > MESH_POINTS:
         vertices = vertices[np.linspace(0, len(vertices) - 1, MESH_POINTS).astype(int)]
