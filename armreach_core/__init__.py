@@ -1,7 +1,7 @@
 """armreach: fast reinforcement-learning prototyping on robot arms described by URDF.
 
 ``import armreach_core`` loads the plugins of the ``armreach`` entry-point group and
-registers one Gymnasium id per task (``armreach/Reach-v3``, ...).
+registers one Gymnasium id per task (``armreach/Reach-v4``, ...).
 """
 
 from __future__ import annotations

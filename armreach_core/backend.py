@@ -42,10 +42,13 @@ class PhysicsConfig:
         visuals: load the URDF's visual meshes (default on; off in an env that never renders, where
             a backend may skip them to save memory). Physics is the same either way.
         engine_drag: keep the drag an engine puts on every moving link (PyBullet's 0.04), no URDF's.
-        iterative_solver: solve motors and contacts iteratively (PyBullet: Gauss-Seidel instead
-            of its direct Dantzig solver; MuJoCo: no change). Both on: the dynamics of the ids
-            before ``Reach-v2`` (``Reach-v0``/``v1``, ``Grasp-v0``, ``ReachAround-v0``).
+        iterative_solver: solve motors and contacts iteratively (PyBullet: Gauss-Seidel, not
+            Dantzig's direct solver; MuJoCo: no change); on, with ``engine_drag``, before ``Reach-v2``.
         merge_fixed_links: load a link fixed to another as part of it (PyBullet: faster, the same bodies).
+        rigid_held_joints: weld each held joint that follows no actuated joint where it is held,
+            on every engine (:mod:`armreach_core.robot.weld`); off before ``Reach-v4``.
+        bounded_ground: the ground is a slab, not Bullet's infinite plane (PyBullet: faster;
+            MuJoCo: no change); off before ``Reach-v4``.
     """
 
     timestep: float = 1.0 / 240.0
@@ -58,6 +61,8 @@ class PhysicsConfig:
     engine_drag: bool = False
     iterative_solver: bool = False
     merge_fixed_links: bool = True
+    rigid_held_joints: bool = True
+    bounded_ground: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.timestep) and 0.0 < self.timestep <= 0.1):
@@ -217,19 +222,14 @@ class Scene(ABC):
         raise self._unsupported("bodies")
 
     def contact_force(self, a: str, b: str) -> float:
-        """Total normal force (N) between ``a`` and ``b``, each a robot link or a body; 0 without contact.
-
-        Read from the last physics step.
-        """
+        """Total normal force (N) between ``a`` and ``b``, each a robot link or a body; 0 without
+        contact. Read from the last physics step."""
         raise self._unsupported("contact queries")
 
     def links_in_contact(self) -> tuple[str, ...]:
-        """The robot's moving links touching anything (the ground, a body, another link), by URDF name.
-
-        Links fixed to the base (:attr:`~armreach_core.robot.model.RobotModel.fixed_links`) are left out.
-
-        Read from the last physics step.
-        """
+        """The robot's moving links touching anything (the ground, a body, another link), by URDF
+        name, read from the last physics step. Links fixed to the base
+        (:attr:`~armreach_core.robot.model.RobotModel.fixed_links`) are left out."""
         raise self._unsupported("contact queries")
 
     def add_shape(

@@ -63,7 +63,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         joint_limit_penalty: subtracted from the reward on each step whose target left the
             joint limits, default 0 (the paper's reward). Training shaping: a policy trained
             with clipping and a penalty also keeps within the limits under the paper's rule.
-        self_collision, inertia_from_file, engine_drag, iterative_solver, merge_fixed_links:
+        self_collision, inertia_from_file, engine_drag, iterative_solver, merge_fixed_links,
+        rigid_held_joints, bounded_ground:
             :class:`~armreach_core.backend.PhysicsConfig`'s (older ids: see ``deprecated_ids``).
         camera: a :class:`~armreach_core.backend.Camera` for rendering.
         tool_joints: joints off the arm's chain to actuate too (a gripper's fingers);
@@ -110,6 +111,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         engine_drag: bool = False,
         iterative_solver: bool = False,
         merge_fixed_links: bool = True,
+        rigid_held_joints: bool = True,
+        bounded_ground: bool = True,
         camera: Camera | None = None,
         tool_joints: tuple[str, ...] | list[str] | None = None,
         allow_external_meshes: bool | None = None,
@@ -177,6 +180,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             engine_drag=engine_drag,
             iterative_solver=iterative_solver,
             merge_fixed_links=merge_fixed_links,
+            rigid_held_joints=rigid_held_joints,
+            bounded_ground=bounded_ground,
         )
         #: Whether joint targets move at most at the URDF's velocity limits (``joint_velocity_limits``).
         self.joint_velocity_limits = bool(joint_velocity_limits)

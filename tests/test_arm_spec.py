@@ -136,13 +136,13 @@ def test_each_task_ships_its_own_zoo_hyperparameters(tmp_path: Path) -> None:
     from armreach_core.rl.zoo import hyperparams_path, task_hyperparams
 
     files = task_hyperparams()
-    assert set(yaml.safe_load(files["reach"].read_text())) == {"armreach/Reach-v3"}
+    assert set(yaml.safe_load(files["reach"].read_text())) == {"armreach/Reach-v4"}
     merged = yaml.safe_load(hyperparams_path(folder=tmp_path).read_text())
     assert set(merged) == {
         spec.env_id for name, spec in armreach_core.get_host().registry.tasks.items() if name in files
     }
     if "grasp" in files:
-        assert merged["armreach/Grasp-v2"]["batch_size"] == 512
+        assert merged["armreach/Grasp-v3"]["batch_size"] == 512
     with pytest.raises(ConfigError, match="ships no rl-zoo3"):
         hyperparams_path("no-such-task")
 

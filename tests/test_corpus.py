@@ -187,7 +187,7 @@ def test_held_joints_cover_every_movable_joint_not_actuated(arm: CorpusArm) -> N
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("arm", _arms())
 def test_check_env(arm: CorpusArm, backend: str) -> None:
-    env = gym.make("armreach/Reach-v3", **_kwargs(arm), backend=backend)
+    env = gym.make("armreach/Reach-v4", **_kwargs(arm), backend=backend)
     try:
         check_env(env.unwrapped, skip_render_check=True)
         # and a longer check: an episode replays exactly after other episodes
@@ -221,9 +221,9 @@ def _pybullet_joints(world: Any) -> dict[str, int]:
 def _held_state(world: Any, robot: Any) -> np.ndarray:
     """Positions of joints the backend does not report (held joints), read from the engine.
 
-    PyBullet welds a held joint that follows no actuated joint where it is held, and merges
-    its child into its parent: its position is read from the pose of its child link's frame
-    relative to its parent's, which is where the joint puts it.
+    Both engines weld a held joint that follows no actuated joint where it is held (PyBullet
+    merges its child into its parent): its position is read from the pose of its child link's
+    frame relative to its parent's, which is where the joint puts it.
     """
     names = [j.name for j in robot.held_joints]
     if world.name == "pybullet":
@@ -239,19 +239,31 @@ def _held_state(world: Any, robot: Any) -> np.ndarray:
             else:
                 out.append(_welded_position(world, robot, joint.name))
         return np.array(out)
+    import mujoco
+
     model, data = world.model, world.data
-    return np.array([data.qpos[model.jnt_qposadr[model.joint(n).id]] for n in names])
+    out = []
+    for name in names:
+        joint = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+        out.append(data.qpos[model.jnt_qposadr[joint]] if joint >= 0 else _welded_position(world, robot, name))
+    return np.array(out)
 
 
 def _welded_position(world: Any, robot: Any, name: str) -> float:
     """The position of welded joint ``name``: its child's frame seen from its parent's, against
     the URDF's forward kinematics with the joint at 0 and moved along its axis."""
-    import pybullet as pb
-
-    body, cid = world.body, world.client
     joint = robot.parsed.model.joint_map[name]
 
     def frame(link: str) -> np.ndarray:
+        out = np.eye(4)
+        if world.name == "mujoco":  # every link is a body, its frame the link's
+            body = world.model.body(link).id
+            out[:3, :3] = world.data.xmat[body].reshape(3, 3)
+            out[:3, 3] = world.data.xpos[body]
+            return out
+        import pybullet as pb
+
+        body, cid = world.body, world.client
         index = world.link_index(link)
         if index < 0:  # the root link's frame: its centre of mass's, less the inertial offset
             com = pb.getBasePositionAndOrientation(body, physicsClientId=cid)
@@ -260,7 +272,6 @@ def _welded_position(world: Any, robot: Any, name: str) -> float:
         else:
             state = pb.getLinkState(body, index, computeForwardKinematics=True, physicsClientId=cid)
             position, orientation = state[4:6]
-        out = np.eye(4)
         out[:3, :3] = np.array(pb.getMatrixFromQuaternion(orientation)).reshape(3, 3)
         out[:3, 3] = position
         return out @ world._merged.offset[link]  # a link merged into another: that one's frame, moved
@@ -287,8 +298,12 @@ def _disturb(world: Any, names: list[str], value: float) -> None:
             if n in index and pb.getJointInfo(world.body, index[n], physicsClientId=world.client)[2] != pb.JOINT_FIXED:
                 pb.resetJointState(world.body, index[n], value, 0.3, physicsClientId=world.client)
         return
+    import mujoco
+
     model, data = world.model, world.data
     for n in names:
+        if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) < 0:  # welded
+            continue
         data.qpos[model.jnt_qposadr[model.joint(n).id]] = value
         data.qvel[model.jnt_dofadr[model.joint(n).id]] = 0.3
 
@@ -322,7 +337,7 @@ def test_held_joints_are_reset_and_held(arm: CorpusArm, backend: str) -> None:
 @pytest.mark.parametrize("arm", _arms())
 def test_observation_is_one_consistent_snapshot(arm: CorpusArm, backend: str) -> None:
     """The observed end effector is the URDF's forward kinematics of the observed joint angles."""
-    env = gym.make("armreach/Reach-v3", **_kwargs(arm), backend=backend)
+    env = gym.make("armreach/Reach-v4", **_kwargs(arm), backend=backend)
     try:
         task, robot = env.unwrapped.task, env.unwrapped.robot
         parts = task.layout.slices

@@ -55,7 +55,7 @@ def test_sb3_check_env(task, backend_name, goal_conditioned):
 
 
 def test_make_and_class_build_the_same_env(backend):
-    made = gym.make("armreach/Reach-v3", backend=backend)
+    made = gym.make("armreach/Reach-v4", backend=backend)
     direct = ArmReach6DOFEnv(backend=backend)
     assert isinstance(made.unwrapped, ArmReach6DOFEnv)
     obs_a, _ = made.reset(seed=5)

@@ -18,7 +18,7 @@ pytestmark = pytest.mark.training
 
 
 def _env() -> Any:
-    return make_vec_env("armreach/Reach-v3", n_envs=1, seed=4, env_kwargs={"backend": "pybullet"})
+    return make_vec_env("armreach/Reach-v4", n_envs=1, seed=4, env_kwargs={"backend": "pybullet"})
 
 
 @pytest.mark.parametrize("algo", ["ddpg", "sac"])

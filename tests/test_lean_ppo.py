@@ -26,7 +26,7 @@ SETTINGS: dict[str, Any] = {"n_steps": 48, "batch_size": 64, "n_epochs": 2, "gam
 def _vec_env() -> Any:
     # 15-step episodes: a rollout of 48 steps holds time-outs, whose rewards bootstrap from the value.
     return make_vec_env(
-        "armreach/Reach-v3", n_envs=4, seed=11, env_kwargs={"backend": "pybullet", "max_episode_steps": 15}
+        "armreach/Reach-v4", n_envs=4, seed=11, env_kwargs={"backend": "pybullet", "max_episode_steps": 15}
     )
 
 

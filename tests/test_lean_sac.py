@@ -17,7 +17,7 @@ pytestmark = pytest.mark.training
 
 
 def _trained(cls: type[Any], steps: int = 160) -> Any:
-    env = make_vec_env("armreach/Reach-v3", n_envs=1, seed=4, env_kwargs={"backend": "pybullet"})
+    env = make_vec_env("armreach/Reach-v4", n_envs=1, seed=4, env_kwargs={"backend": "pybullet"})
     model = cls("MlpPolicy", env, learning_starts=40, batch_size=32, seed=2, policy_kwargs={"net_arch": [32, 32]})
     return model.learn(steps)
 
@@ -51,7 +51,7 @@ def test_deterministic_actions_are_sbxs_own(tmp_path: Any) -> None:
 
 
 def _overlapping(cls: type[Any] = LeanSAC, steps: int = 160, seed: int = 2) -> Any:
-    env = make_vec_env("armreach/Reach-v3", n_envs=1, seed=4, env_kwargs={"backend": "pybullet"})
+    env = make_vec_env("armreach/Reach-v4", n_envs=1, seed=4, env_kwargs={"backend": "pybullet"})
     model = cls(
         "MlpPolicy",
         env,

@@ -588,9 +588,11 @@ def test_the_motor_joints_layout_in_the_state_does_not_change_the_physics(tmp_pa
     np.testing.assert_allclose(runs["ba"], runs["ab"], rtol=0, atol=1.5e-14)
 
 
-def test_a_mimic_follows_an_actuated_master_and_has_its_own_motor_otherwise(tmp_path):
+def test_a_mimic_follows_an_actuated_master_and_is_welded_or_held_by_its_own_motor_otherwise(tmp_path):
     """As in PyBullet: a mimic of a joint the arm actuates follows it (a joint equality, no
-    motor); a mimic of a held joint is held by a motor of its own, with its own effort."""
+    motor); a mimic of a held joint is welded where it is held, its link where the URDF's
+    kinematics put it, or, without ``rigid_held_joints`` (before ``Reach-v4``), held by a
+    motor of its own."""
     from armreach_mujoco.servo import MOTOR_PREFIX
     from tests.test_robot import _arm
 
@@ -604,11 +606,20 @@ def test_a_mimic_follows_an_actuated_master_and_has_its_own_motor_otherwise(tmp_
     path = _arm(tmp_path, tail, ("left", "right"))
     held_master = RobotModel(path, home=[0.1, 0.2, 0.3])
     actuated_master = RobotModel(path, home=[0.1, 0.2, 0.3, 0.02], tool_joints=("a",))
-    for robot, own_motor in ((held_master, True), (actuated_master, False)):
-        backend = mjb.MuJoCoBackend(robot, PhysicsConfig())
+    cases = (
+        (held_master, PhysicsConfig(), "welded"),
+        (held_master, PhysicsConfig(rigid_held_joints=False), "motor"),
+        (actuated_master, PhysicsConfig(), "tied"),
+    )
+    for robot, physics, how in cases:
+        backend = mjb.MuJoCoBackend(robot, physics)
         model = backend.model
-        b = model.joint("b").id
+        b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "b")
         motor = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TENDON, MOTOR_PREFIX + "b") >= 0
         tied = any(model.eq_type[i] == mujoco.mjtEq.mjEQ_JOINT and model.eq_obj1id[i] == b for i in range(model.neq))
+        backend.reset_joints(robot.home)
+        right = backend.link_position("right")
         backend.close()
-        assert (motor, tied) == (own_motor, not own_motor)
+        want = {"welded": (False, False, False), "motor": (True, True, False), "tied": (True, False, True)}[how]
+        assert (b >= 0, motor, tied) == want
+        np.testing.assert_allclose(right, robot.link_transforms(robot.home)["right"][:3, 3], atol=1e-9)

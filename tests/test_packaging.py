@@ -39,7 +39,7 @@ def test_core_dependencies_leave_training_to_the_rl_extra():
 def test_the_env_runs_with_the_training_stack_missing():
     code = HIDE.format(names=TRAINING) + (
         "import gymnasium as gym, armreach_core\n"
-        f"env = gym.make('armreach/Reach-v3', backend={BACKENDS[0]!r})\n"
+        f"env = gym.make('armreach/Reach-v4', backend={BACKENDS[0]!r})\n"
         "env.reset(seed=0)\n"
         "for _ in range(5): env.step(env.action_space.sample())\n"
         "env.close()\n"
@@ -86,7 +86,7 @@ def test_a_shadowing_source_tree_names_the_failed_plugin(tmp_path):
         "import warnings; warnings.simplefilter('ignore')\n"
         "import gymnasium as gym, armreach_core\n"
         "try:\n"
-        "    gym.make('armreach/Reach-v3')\n"
+        "    gym.make('armreach/Reach-v4')\n"
         "except armreach_core.ArmReachError as exc:\n"
         "    print(exc)\n"
     )

@@ -31,6 +31,8 @@ DATA = Path(__file__).parent / "data"
 PINNED = DATA / "pinned_trajectories.json"
 #: PyBullet's trajectories as pinned before the env ids of ``Reach-v2`` (its links dragged).
 ENGINE_DRAG_PINNED = DATA / "pinned_trajectories_engine_drag.json"
+#: PyBullet's trajectories as pinned before the env ids of ``Reach-v4`` (Bullet's infinite ground plane).
+PLANE_GROUND_PINNED = DATA / "pinned_trajectories_plane_ground.json"
 LIMITS_PINNED = DATA / "pinned_limits_and_ground.json"
 SEEDS = (0, 1)
 STEPS = 200
@@ -154,6 +156,8 @@ def test_engine_drag_gives_the_dynamics_of_the_older_ids_bit_for_bit(seed: int) 
         "iterative_solver": True,
         "merge_fixed_links": False,
         "joint_velocity_limits": False,
+        "rigid_held_joints": False,
+        "bounded_ground": False,
     }
     want = json.loads(ENGINE_DRAG_PINNED.read_text())[f"pybullet/{seed}"]
     got = trajectory("pybullet", seed, **older)
@@ -162,6 +166,24 @@ def test_engine_drag_gives_the_dynamics_of_the_older_ids_bit_for_bit(seed: int) 
     np.testing.assert_array_equal(got["rewards"], want["rewards"])
     assert not np.array_equal(trajectory("pybullet", seed)["observations"], want["observations"])
     assert not np.array_equal(trajectory("pybullet", seed, engine_drag=True)["observations"], want["observations"])
+
+
+@pytest.mark.skipif("pybullet" not in BACKENDS, reason="PyBullet is not installed")
+@pytest.mark.parametrize("seed", SEEDS)
+def test_reach_v3_keeps_pybullets_ground_plane_bit_for_bit(seed: int) -> None:
+    """``Reach-v3``'s keywords reproduce PyBullet's trajectories as pinned before the ground became
+    a slab (seed 0's wrist touches the ground: the two grounds part there; seed 1 touches nothing)."""
+    from armreach_core.plugins.lookup import task_spec
+
+    older = task_spec("reach").deprecated_ids["armreach/Reach-v3"]
+    assert older == {"rigid_held_joints": False, "bounded_ground": False}
+    want = json.loads(PLANE_GROUND_PINNED.read_text())[f"pybullet/{seed}"]
+    got = trajectory("pybullet", seed, **older)
+    assert got["ends"] == want["ends"]
+    np.testing.assert_array_equal(got["observations"], want["observations"])
+    np.testing.assert_array_equal(got["rewards"], want["rewards"])
+    now = trajectory("pybullet", seed)["observations"]
+    assert np.array_equal(now, want["observations"]) == (seed == 1)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

@@ -90,9 +90,9 @@ def test_duplicate_env_id_is_rejected():
     class SameId:
         @hookimpl
         def armreach_register_tasks(self, register):
-            register(TaskSpec(name="other", env_id="armreach/Reach-v3", load=lambda: ReachTask))
+            register(TaskSpec(name="other", env_id="armreach/Reach-v4", load=lambda: ReachTask))
 
-    with pytest.raises(PluginError, match="env id 'armreach/Reach-v3' is registered twice"):
+    with pytest.raises(PluginError, match="env id 'armreach/Reach-v4' is registered twice"):
         armreach_core.register_plugin(SameId(), name="same-id")
 
 

@@ -103,7 +103,7 @@ def test_reach_v0_keeps_its_targets_and_v2_draws_the_same_ones_where_they_clear_
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         old = gym.make("armreach/Reach-v0", urdf=urdf, backend="pybullet").unwrapped
-    new = gym.make("armreach/Reach-v3", urdf=urdf, backend="pybullet").unwrapped
+    new = gym.make("armreach/Reach-v4", urdf=urdf, backend="pybullet").unwrapped
     engine = _Engine(new.robot)  # type: ignore[attr-defined]
     touching = 0
     try:
@@ -128,10 +128,10 @@ def test_reach_v0_warns_names_its_successor_and_draws_its_old_targets() -> None:
         warnings.simplefilter("always")
         old = gym.make("armreach/Reach-v0", backend="pybullet")
     said = [str(w.message) for w in caught if issubclass(w.category, DeprecationWarning)]
-    assert any("armreach/Reach-v0 is deprecated: use armreach/Reach-v3" in text for text in said), said
+    assert any("armreach/Reach-v0 is deprecated: use armreach/Reach-v4" in text for text in said), said
     assert old.unwrapped.task.sampler.clear_of_arm is None  # type: ignore[attr-defined]
     old.close()
-    new = gym.make("armreach/Reach-v3", backend="pybullet")
+    new = gym.make("armreach/Reach-v4", backend="pybullet")
     assert new.unwrapped.task.sampler.clear_of_arm == new.unwrapped.task.success_threshold  # type: ignore[attr-defined]
     new.close()
 

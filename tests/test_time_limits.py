@@ -51,7 +51,7 @@ def test_grasp_stops_at_the_same_step_under_make_and_when_built_directly():
     from armreach_grasp.env import ArmGraspEnv
 
     limit = get_host().registry.tasks["grasp"].max_episode_steps
-    made = gym.make("armreach/Grasp-v2", backend=BACKENDS[0])
+    made = gym.make("armreach/Grasp-v3", backend=BACKENDS[0])
     built = ArmGraspEnv(backend=BACKENDS[0])
     try:
         assert _steps_until_truncated(made, limit) == _steps_until_truncated(built, limit) == limit
@@ -61,14 +61,14 @@ def test_grasp_stops_at_the_same_step_under_make_and_when_built_directly():
 
 
 def test_make_with_max_episode_steps_gives_exactly_one_limit_of_n():
-    env = gym.make("armreach/Reach-v3", backend=BACKENDS[0], max_episode_steps=7)
+    env = gym.make("armreach/Reach-v4", backend=BACKENDS[0], max_episode_steps=7)
     try:
         assert env.spec is not None and env.spec.max_episode_steps == 7
         assert _steps_until_truncated(env, 7) == 7
     finally:
         env.close()
     # a limit longer than the registered one is not cut short by the env itself
-    env = gym.make("armreach/Reach-v3", backend=BACKENDS[0], max_episode_steps=2100)
+    env = gym.make("armreach/Reach-v4", backend=BACKENDS[0], max_episode_steps=2100)
     try:
         assert _steps_until_truncated(env, 2100) == 2100
     finally:

@@ -625,7 +625,7 @@ sys.modules["stable_baselines3"] = None  # as if it were not installed
 import gymnasium as gym
 import armreach_core
 from armreach_core.errors import MissingExtraError
-env = gym.make("armreach/Reach-v3")
+env = gym.make("armreach/Reach-v4")
 env.reset(seed=0)
 env.step(env.action_space.sample())
 env.close()

@@ -1,4 +1,4 @@
-"""The env moves no joint faster than its URDF velocity limit (``Reach-v3``); older ids keep the old rule."""
+"""The env moves no joint faster than its URDF velocity limit (since ``Reach-v3``); older ids keep the old rule."""
 
 from __future__ import annotations
 
@@ -46,7 +46,7 @@ def _travel(env: ArmEnv, steps: int) -> np.ndarray:
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_slow_joint_moves_at_its_velocity_limit_and_the_others_as_before(slow_arm: Path, backend: str) -> None:
     steps = 8
-    new = gym.make("armreach/Reach-v3", backend=backend, urdf=slow_arm).unwrapped
+    new = gym.make("armreach/Reach-v4", backend=backend, urdf=slow_arm).unwrapped
     with warnings.catch_warnings():  # Gymnasium's "out of date" for an older id
         warnings.simplefilter("ignore", DeprecationWarning)
         old = gym.make("armreach/Reach-v2", backend=backend, urdf=slow_arm).unwrapped

@@ -26,7 +26,7 @@ from PIL import ImageGrab
 
 backend = sys.argv[1]
 blank = np.asarray(ImageGrab.grab(xdisplay=os.environ["DISPLAY"]))
-env = gym.make("armreach/Reach-v3", backend=backend, render_mode="human")
+env = gym.make("armreach/Reach-v4", backend=backend, render_mode="human")
 env.reset(seed=0)
 start = time.perf_counter()
 for _ in range(12):

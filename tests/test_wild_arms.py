@@ -17,6 +17,7 @@ from armreach_core.diagnostics.corpus import corpus_arm
 from armreach_core.robot.geometry import self_collisions
 from armreach_core.robot.ik import IKPolicy
 from armreach_core.robot.model import RobotModel
+from tests.conftest import BACKENDS
 
 
 def _robots() -> Path:
@@ -68,3 +69,33 @@ def test_the_ik_reference_plans_for_an_arm_its_motors_do_not_hold():
     action = policy.act(robot.home, target)
     assert time.perf_counter() - start < 0.5  # measured 0.004 s; refusing every plan, 2.2 s
     assert np.abs(action).max() > 0.5  # it moves towards the plan
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_second_arm_too_weak_for_its_weight_stays_where_it_is_held(backend):
+    """Baxter's right arm is held while the left one moves; its motors' efforts are below what
+    gravity puts on it (the robot's gravity compensation is not in the URDF). Welded, it stays at
+    its held pose on both engines; held by those motors (``Reach-v3``), it sinks until its wrist
+    lies on the ground, and every physics step pays for that contact."""
+    from armreach_core.env import ArmEnv
+
+    urdf = str(_robots() / "baxter_description/urdf/baxter.urdf")
+    held_pose = None
+    sunk = {}
+    for rigid in (True, False):
+        env = ArmEnv(backend=backend, urdf=urdf, ee_link="left_gripper_base_link", rigid_held_joints=rigid)
+        try:
+            env.reset(seed=0)
+            robot = env.robot
+            held_pose = robot.link_transforms(robot.home)["right_wrist"][:3, 3]
+            rng = np.random.default_rng(0)
+            for _ in range(48):  # 2 s
+                env.step(rng.uniform(-1, 1, robot.dof).astype(np.float32))
+            wrist = env.backend.link_position("right_wrist")
+            sunk[rigid] = float(held_pose[2] - wrist[2])
+            if rigid:
+                np.testing.assert_allclose(wrist, held_pose, atol=1e-6)
+                assert not {link for link in env.backend.links_in_contact() if link.startswith("right_")}
+        finally:
+            env.close()
+    assert sunk[False] > 0.15  # measured 0.236 m on both engines, the wrist 0.07 m below the ground

@@ -240,7 +240,7 @@ def test_a_xacro_arm_steps_under_gym_make(arm, backend):
     if backend not in BACKENDS:
         pytest.skip(f"the {backend} backend is not installed")
     top, tools = arm
-    env = gym.make("armreach/Reach-v3", backend=backend, urdf=top, package_dirs={"tools_support": tools})
+    env = gym.make("armreach/Reach-v4", backend=backend, urdf=top, package_dirs={"tools_support": tools})
     try:
         env.reset(seed=0)
         for _ in range(3):

@@ -29,9 +29,9 @@ def _zoo(*args: str, cwd) -> str:
     return result.stdout
 
 
-@pytest.mark.parametrize("env_id", ["armreach/Reach-v3", "armreach/Grasp-v2"])
+@pytest.mark.parametrize("env_id", ["armreach/Reach-v4", "armreach/Grasp-v3"])
 def test_rl_zoo3_trains_and_enjoys(env_id, tmp_path):
-    if env_id == "armreach/Grasp-v2" and "grasp" not in armreach_core.available_tasks():
+    if env_id == "armreach/Grasp-v3" and "grasp" not in armreach_core.available_tasks():
         pytest.skip("armreach-grasp is not installed")
     conf = str(hyperparams_path())
     common = ["--algo", "tqc", "--env", env_id, "-f", "logs"]

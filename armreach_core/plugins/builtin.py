@@ -22,7 +22,7 @@ def armreach_register_tasks(register: Register) -> None:
     register(
         TaskSpec(
             name=DEFAULT_TASK,
-            env_id="armreach/Reach-v3",
+            env_id="armreach/Reach-v4",
             deprecated_ids={
                 "armreach/Reach-v0": {
                     "targets_clear_of_arm": False,
@@ -30,14 +30,23 @@ def armreach_register_tasks(register: Register) -> None:
                     "iterative_solver": True,
                     "merge_fixed_links": False,
                     "joint_velocity_limits": False,
+                    "rigid_held_joints": False,
+                    "bounded_ground": False,
                 },
                 "armreach/Reach-v1": {
                     "engine_drag": True,
                     "iterative_solver": True,
                     "merge_fixed_links": False,
                     "joint_velocity_limits": False,
+                    "rigid_held_joints": False,
+                    "bounded_ground": False,
                 },
-                "armreach/Reach-v2": {"joint_velocity_limits": False},
+                "armreach/Reach-v2": {
+                    "joint_velocity_limits": False,
+                    "rigid_held_joints": False,
+                    "bounded_ground": False,
+                },
+                "armreach/Reach-v3": {"rigid_held_joints": False, "bounded_ground": False},
             },
             load="armreach_core.tasks.reach.task:ReachTask",
             robot=DEFAULT_ROBOT,

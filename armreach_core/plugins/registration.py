@@ -1,7 +1,7 @@
 """Keeps Gymnasium's registry in step with the tasks plugins register.
 
 Each task gets its id (``TaskSpec.env_id``). When a task's dynamics or observation change,
-its id's version goes up (``armreach/Reach-v3``) and the old id stays registered
+its id's version goes up (``armreach/Reach-v4``) and the old id stays registered
 (``TaskSpec.deprecated_ids``, with the keyword arguments that give the old behaviour):
 making it still works and warns, naming the new id.
 """

@@ -114,7 +114,7 @@ class TaskSpec:
 
     Attributes:
         name: the task's name (``reach``).
-        env_id: the Gymnasium id (``armreach/Reach-v3``); the namespace must be ``armreach``.
+        env_id: the Gymnasium id (``armreach/Reach-v4``); the namespace must be ``armreach``.
         load: the :class:`~armreach_core.task.Task` subclass as ``"module:Class"`` (or a
             callable returning it).
         robot: the registered robot the task uses when no ``urdf`` is given (``None``:

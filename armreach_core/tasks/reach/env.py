@@ -20,7 +20,7 @@ _DOC = """A URDF arm reaches random 3D targets (the paper's *ArmReach6DOFEnv*).
     self-collision is off unless ``self_collision=True`` (parent/child pairs excluded), and
     inertias come from the URDF (``inertia_from_file=True``).
 
-    Made with ``gym.make("armreach/Reach-v3", backend="pybullet", urdf=None,
+    Made with ``gym.make("armreach/Reach-v4", backend="pybullet", urdf=None,
     ee_link=None, render_mode=None)`` after ``import armreach_core``, or by calling this
     class with the same keyword arguments.
 

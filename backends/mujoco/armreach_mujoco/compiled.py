@@ -23,6 +23,7 @@ import numpy.typing as npt
 from armreach_core.backend import PhysicsConfig
 from armreach_core.errors import URDFError
 from armreach_core.robot.model import RobotModel
+from armreach_core.robot.weld import rigid_joints
 from armreach_mujoco import native as native_motor
 from armreach_mujoco import servo, world
 from armreach_mujoco.engine import log
@@ -54,10 +55,12 @@ class CompiledModel:
         mocap: mocap index of each marker, by marker name.
         free: ``(qpos address, dof address)`` of each free box's joint, by box name.
         movable: mocap index of each movable fixed shape (``add_shape``), by its name.
-        held_qpos, held_qvel: addresses of ``robot.held_joints`` in ``qpos`` and ``qvel``.
-        held_servos: indices in ``robot.held_joints`` of those held by a motor (the others
-            follow their master through a joint equality); held_motors: their motor tendons
-            (or actuators).
+        held_present: indices in ``robot.held_joints`` of those that are joints of the model
+            (the others are welded: :mod:`armreach_core.robot.weld`).
+        held_qpos, held_qvel: their addresses in ``qpos`` and ``qvel``, in ``held_present`` order.
+        held_servos: indices in ``held_present`` of those held by a motor (the others follow
+            their master through a joint equality); held_motors: their motor tendons (or
+            actuators).
         native: the motors are MuJoCo's position actuators, not PyBullet's motor.
     """
 
@@ -68,6 +71,7 @@ class CompiledModel:
     bodies: Mapping[str, int]
     mocap: Mapping[str, int]
     free: Mapping[str, tuple[int, int]]
+    held_present: Index = field(default_factory=lambda: _index([]))
     held_qpos: Index = field(default_factory=lambda: _index([]))
     held_qvel: Index = field(default_factory=lambda: _index([]))
     held_servos: Index = field(default_factory=lambda: _index([]))
@@ -82,12 +86,13 @@ _cache_lock = threading.Lock()
 
 def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras, native: bool = False) -> CompiledModel:
     """Build and compile a model (uncached: use :func:`compiled_model`); ``native``: MuJoCo's position actuators."""
-    spec = spec_from_urdf(robot, physics.visuals)
+    welded = rigid_joints(robot) if physics.rigid_held_joints else {}
+    spec = spec_from_urdf(robot, physics.visuals, welded)
     world.set_options(spec, physics)
     if native:
         native_motor.set_options(spec)
     world.set_arm_contacts(spec, robot, physics)
-    servo.add_servos(spec, robot, native_motor.add_actuator if native else None)
+    servo.add_servos(spec, robot, native_motor.add_actuator if native else None, welded)
     world.add_scene(spec, physics, extras)
     world.add_contact_pairs(spec, robot, physics, extras)
     try:
@@ -105,12 +110,13 @@ def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras, native: boo
     qvel = _index([int(model.jnt_dofadr[model.joint(n).id]) for n in names])
     motor_id = model.actuator if native else model.tendon
     motors = _index([int(motor_id(servo.MOTOR_PREFIX + n).id) for n in names])
-    held = [j.name for j in robot.held_joints]
-    held_qpos = _index([int(model.jnt_qposadr[model.joint(n).id]) for n in held])
-    held_qvel = _index([int(model.jnt_dofadr[model.joint(n).id]) for n in held])
-    held_servos = _index(servo.servoed_held(robot))
-    held_motors = _index([int(motor_id(servo.MOTOR_PREFIX + held[i]).id) for i in held_servos])
-    held_home = robot.held_positions(robot.home)
+    held_present = _index([i for i, j in enumerate(robot.held_joints) if j.name not in welded])
+    held = [robot.held_joints[i] for i in held_present]
+    held_qpos = _index([int(model.jnt_qposadr[model.joint(j.name).id]) for j in held])
+    held_qvel = _index([int(model.jnt_dofadr[model.joint(j.name).id]) for j in held])
+    held_servos = _index([k for k, j in enumerate(held) if not servo.follows(robot, j)])
+    held_motors = _index([int(motor_id(servo.MOTOR_PREFIX + held[k].name).id) for k in held_servos])
+    held_home = robot.held_positions(robot.home)[held_present]
     motor_qpos = np.concatenate((qpos, held_qpos))
     motor_qvel = np.concatenate((qvel, held_qvel[held_servos]))
     motor_home = np.concatenate((robot.home, held_home))
@@ -134,6 +140,7 @@ def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras, native: boo
         bodies=MappingProxyType(bodies),
         mocap=MappingProxyType(mocap),
         free=MappingProxyType(free),
+        held_present=held_present,
         held_qpos=held_qpos,
         held_qvel=held_qvel,
         held_servos=held_servos,

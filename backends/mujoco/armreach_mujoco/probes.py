@@ -26,7 +26,8 @@ def _motors(backend: MuJoCoBackend) -> Motors | NativeMotors:
         np.concatenate((compiled.qpos, compiled.held_qpos[servoed])),
         np.concatenate((compiled.qvel, compiled.held_qvel[servoed])),
     )
-    motors.targets[len(compiled.qpos) :] = [backend.robot.held_joints[i].position for i in servoed]
+    held = [backend.robot.held_joints[i] for i in compiled.held_present]
+    motors.targets[len(compiled.qpos) :] = [held[i].position for i in servoed]
     return motors
 
 

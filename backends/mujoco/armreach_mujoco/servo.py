@@ -34,9 +34,10 @@ arm gets no rotor inertia (armature: 0 as built, a physics profile may set it) a
 compensation, as in PyBullet; URDF
 ``friction`` is dropped, as PyBullet ignores it.
 
-Joints the arm does not actuate (``robot.held_joints``) get the same motor, held at their
-hold position; a mimic joint whose master moves gets no motor but a joint equality
-(``mjEQ_JOINT``) that makes it follow its master, as the URDF says.
+Joints the arm does not actuate (``robot.held_joints``) are welded where they are held
+(:mod:`armreach_core.robot.weld`; without ``PhysicsConfig.rigid_held_joints`` they get the
+same motor, aimed at their hold position); a mimic joint whose master moves gets no motor
+but a joint equality (``mjEQ_JOINT``) that makes it follow its master, as the URDF says.
 
 The measurements in ``docs/mujoco-backend.md``.
 """
@@ -44,7 +45,7 @@ The measurements in ``docs/mujoco-backend.md``.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any
 
 import numpy as np
@@ -68,16 +69,19 @@ MOTOR_PREFIX = "armreach_motor_"
 AddMotor = Callable[[Any, str, float], None]
 
 
-def add_servos(spec: Any, robot: RobotModel, motor: AddMotor | None = None) -> None:
-    """One motor per joint of ``robot``, then one per held joint that follows no moving master,
-    and the equalities of mimic joints. Motors are created in that order: by ``motor``, default
-    :func:`add_motor_tendon` (PyBullet's motor).
+def add_servos(spec: Any, robot: RobotModel, motor: AddMotor | None = None, welded: Collection[str] = ()) -> None:
+    """One motor per joint of ``robot``, then one per held joint that follows no moving master
+    and is not ``welded`` (a fixed joint in ``spec``), and the equalities of mimic joints.
+    Motors are created in that order: by ``motor``, default :func:`add_motor_tendon`
+    (PyBullet's motor).
     """
     add = motor or add_motor_tendon
     for joint_spec in robot.joints:
         _prepare(spec, robot, joint_spec.name, joint_spec.damping)
         add(spec, joint_spec.name, joint_spec.effort)
     for held in robot.held_joints:
+        if held.name in welded:
+            continue
         if follows(robot, held):
             _follow(spec, robot, held)
         else:
@@ -96,11 +100,6 @@ def follows(robot: RobotModel, held: HeldJoint) -> bool:
     its own effort, at the position the mimic gives at reset.
     """
     return held.mimic is not None and held.mimic.joint in robot.joint_names
-
-
-def servoed_held(robot: RobotModel) -> list[int]:
-    """Indices in ``robot.held_joints`` of the held joints that have a motor."""
-    return [i for i, held in enumerate(robot.held_joints) if not follows(robot, held)]
 
 
 def _prepare(spec: Any, robot: RobotModel, name: str, damping: float | None) -> None:
@@ -284,6 +283,5 @@ __all__ = [
     "cap_damping",
     "follows",
     "home_inertia",
-    "servoed_held",
     "velocity_solref",
 ]

@@ -33,8 +33,9 @@ class StateIO:
         self.data = data
         self._qpos, self._qvel = compiled.qpos, compiled.qvel
         self._ee = compiled.bodies[robot.ee_link]
-        self._held = len(robot.held_joints) > 0
-        self._held_targets = np.array([robot.held_joints[i].position for i in compiled.held_servos])
+        self._held = len(compiled.held_present) > 0
+        present = compiled.held_present
+        self._held_targets = np.array([robot.held_joints[present[i]].position for i in compiled.held_servos])
         self._has_free = bool(compiled.free)
         servoed = compiled.held_servos
         #: the motors: the arm's joints first, then the held joints that have one
@@ -58,7 +59,7 @@ class StateIO:
     def _hold(self, q: FloatArray) -> None:
         """Held joints (fingers...) where they belong when the arm is at ``q``, their motors holding them."""
         if self._held:
-            self.data.qpos[self.compiled.held_qpos] = self.robot.held_positions(q)
+            self.data.qpos[self.compiled.held_qpos] = self.robot.held_positions(q)[self.compiled.held_present]
             self.motors.targets[self.robot.dof :] = self._held_targets
 
     def carry_over(self, old: StateIO) -> None:

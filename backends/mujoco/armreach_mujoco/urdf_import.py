@@ -10,6 +10,7 @@ Links that move but have no ``<inertial>`` get PyBullet's default inertial (see
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -20,19 +21,23 @@ from armreach_core.robot.hulls import simulation_urdf
 from armreach_core.robot.meshes import readable
 from armreach_core.robot.model import RobotModel
 from armreach_core.robot.statics import BARE_LINK_MASS, bare_mass
+from armreach_core.robot.weld import weld
 from armreach_mujoco.engine import mujoco
 
 #: Mesh formats MuJoCo reads itself; others are converted to .obj with trimesh.
 NATIVE_MESHES = (".stl", ".obj", ".msh")
 
 
-def urdf_for_mujoco(robot: RobotModel, visuals: bool = True) -> str:
+def urdf_for_mujoco(robot: RobotModel, visuals: bool = True, welded: Mapping[str, float] | None = None) -> str:
     """The robot's resolved URDF with readable mesh paths and MuJoCo's compiler block.
 
     Collision meshes are their convex hulls (what MuJoCo collides anyway) and, without
     ``visuals``, there are no visual meshes (:func:`armreach_core.robot.hulls.simulation_urdf`).
+    The held joints in ``welded`` are fixed joints at the positions it gives
+    (:mod:`armreach_core.robot.weld`).
     """
-    root = etree.fromstring(readable(simulation_urdf(robot, visuals=visuals), NATIVE_MESHES))
+    urdf = weld(simulation_urdf(robot, visuals=visuals), robot, welded or {})
+    root = etree.fromstring(readable(urdf, NATIVE_MESHES))
     for old in root.findall("mujoco"):
         root.remove(old)
     block = etree.SubElement(root, "mujoco")
@@ -55,7 +60,7 @@ def links_without_inertial(robot: RobotModel) -> list[str]:
     return [link for link in robot.link_names if links[link].inertial is None and bare_mass(robot, link) > 0]
 
 
-def spec_from_urdf(robot: RobotModel, visuals: bool = True) -> Any:
+def spec_from_urdf(robot: RobotModel, visuals: bool = True, welded: Mapping[str, float] | None = None) -> Any:
     """An ``MjSpec`` of the robot alone, as MuJoCo imports it, with PyBullet's missing inertials.
 
     PyBullet's URDF reader gives a link without ``<inertial>`` whose joint moves 1 kg and
@@ -64,7 +69,7 @@ def spec_from_urdf(robot: RobotModel, visuals: bool = True) -> Any:
     load (:func:`armreach_core.robot.inertia.massless_frames`).
     """
     try:
-        spec = mujoco.MjSpec.from_string(urdf_for_mujoco(robot, visuals))
+        spec = mujoco.MjSpec.from_string(urdf_for_mujoco(robot, visuals, welded))
     except ValueError as exc:  # MuJoCo's URDF importer refused the file
         raise URDFError(
             f"MuJoCo cannot read {robot.urdf_path}: {' '.join(str(exc).split())}; fix the element it names"

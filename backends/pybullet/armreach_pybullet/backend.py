@@ -35,6 +35,7 @@ from armreach_pybullet.friction import JointFriction
 from armreach_pybullet.loader import GROUND_RGBA, PYBULLET_MESHES, SOLVER_ITERATIONS, build_world, load_robot
 from armreach_pybullet.render import point_window, render
 from armreach_pybullet.servo import POSITION_GAIN, VELOCITY_GAIN, Motors, bound_damping, read_layout
+from armreach_pybullet.weld import welded_joints
 from armreach_pybullet.world import PARKING, World
 
 
@@ -69,7 +70,7 @@ class PyBulletBackend(Backend):
         cid, robot = self._client, self.robot
         build_world(cid, self.physics)
         self._body, self._base_pose, self._merged = load_robot(cid, robot, self.physics)
-        layout = read_layout(cid, self._body, robot, self._merged)
+        layout = read_layout(cid, self._body, robot, self._merged, welded_joints(robot, self.physics))
         self._link_index = layout.link_index
         self._joints = layout.joints
         self._held, self._held_slots = layout.held, layout.held_slots

@@ -10,9 +10,10 @@ from armreach_core.errors import URDFError
 from armreach_core.robot.hulls import simulation_urdf
 from armreach_core.robot.meshes import readable
 from armreach_core.robot.model import RobotModel
+from armreach_core.robot.weld import weld
 from armreach_pybullet.engine import engine_output_to_log, pb
 from armreach_pybullet.merge import Merged, merge_fixed, unmerged
-from armreach_pybullet.weld import weld
+from armreach_pybullet.weld import welded_joints
 
 #: Sweeps of Bullet's projected Gauss-Seidel solver per physics step (PyBullet's default is 50).
 #: Bullet stops once the solution stops changing, so an arm in free space usually needs far
@@ -21,6 +22,10 @@ from armreach_pybullet.weld import weld
 #: the physics. 200 comes within 1-3 mm of 1,000 (docs/mujoco-backend.md, "Solver").
 SOLVER_ITERATIONS = 200
 GROUND_RGBA = (0.86, 0.87, 0.89, 1.0)
+#: Half the width of the ground slab (m): far past any arm's reach (KR210's is 3.3 m).
+GROUND_HALF_EXTENT = 100.0
+#: Depth of the ground slab below z = 0 (m): no link goes through it in one physics step.
+GROUND_DEPTH = 1.0
 #: Mesh formats PyBullet's URDF loader reads; others are converted to .obj (armreach_core.robot.meshes).
 PYBULLET_MESHES = (".obj", ".stl", ".dae")
 
@@ -53,6 +58,12 @@ def build_world(cid: int, physics: PhysicsConfig) -> None:
     Gauss-Seidel needs up to :data:`SOLVER_ITERATIONS` sweeps where joints are nearly coaxial or
     links rest on the ground (xArm7, the KR16, the Panda: 0.37-0.49 of ar6's env steps/s),
     and it converges to the same motion (docs/benchmarks.md, "Detailed and heavy arms").
+
+    With ``physics.bounded_ground`` the ground is a slab whose top face is the plane z = 0
+    (:data:`GROUND_HALF_EXTENT` m to each side, :data:`GROUND_DEPTH` m deep) rather than
+    Bullet's infinite plane: a plane's bounding box holds every link, so every physics step
+    tested each link's hulls against it, on a detailed arm most of the step's collision time
+    (Vega: 24 of 40 µs); the slab's box meets only links that come down to it.
     """
     pb.setGravity(*physics.gravity, physicsClientId=cid)
     pb.setTimeStep(physics.timestep, physicsClientId=cid)
@@ -61,7 +72,15 @@ def build_world(cid: int, physics: PhysicsConfig) -> None:
         with engine_output_to_log():  # Bullet prints which solver it switched to
             pb.setPhysicsEngineParameter(constraintSolverType=pb.CONSTRAINT_SOLVER_LCP_DANTZIG, physicsClientId=cid)
     if physics.ground:
-        shape = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=cid)
+        if physics.bounded_ground:
+            shape = pb.createCollisionShape(
+                pb.GEOM_BOX,
+                halfExtents=[GROUND_HALF_EXTENT, GROUND_HALF_EXTENT, GROUND_DEPTH / 2],
+                collisionFramePosition=[0.0, 0.0, -GROUND_DEPTH / 2],
+                physicsClientId=cid,
+            )
+        else:
+            shape = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=cid)
         visual = pb.createVisualShape(
             pb.GEOM_BOX, halfExtents=[1.5, 1.5, 0.001], rgbaColor=GROUND_RGBA, physicsClientId=cid
         )
@@ -72,9 +91,8 @@ def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int
     """Load ``robot`` into client ``cid`` at its base pose, with a fixed base: its body id, that
     pose, and where its links went.
 
-    Held joints that follow no actuated joint are welded at their hold positions
-    (:mod:`armreach_pybullet.weld`), and links fixed to another are merged into it
-    (:mod:`armreach_pybullet.merge`).
+    Held joints are welded at their hold positions (:mod:`armreach_pybullet.weld`), and links
+    fixed to another are merged into it (:mod:`armreach_pybullet.merge`).
 
     Raises:
         URDFError: PyBullet refused the URDF (the client is then disconnected).
@@ -89,7 +107,7 @@ def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int
     with tempfile.TemporaryDirectory(prefix="armreach-") as tmp:
         path = os.path.join(tmp, "robot.urdf")
         with open(path, "wb") as handle:
-            urdf = weld(simulation_urdf(robot, visuals=physics.visuals), robot)
+            urdf = weld(simulation_urdf(robot, visuals=physics.visuals), robot, welded_joints(robot, physics))
             urdf, merged = merge_fixed(urdf) if physics.merge_fixed_links else (urdf, unmerged(urdf))
             handle.write(readable(urdf, PYBULLET_MESHES))
         try:
@@ -116,6 +134,8 @@ def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int
 
 
 __all__ = [
+    "GROUND_DEPTH",
+    "GROUND_HALF_EXTENT",
     "GROUND_RGBA",
     "LINK_DRAG",
     "PYBULLET_MESHES",

@@ -21,11 +21,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from lxml import etree
-from trimesh.transformations import euler_from_matrix, euler_matrix
 
 from armreach_core.robot.inertia import INERTIA_KEYS, inertia_tensor
 from armreach_core.robot.model import FloatArray
 from armreach_core.robot.statics import BARE_LINK_MASS
+from armreach_core.robot.weld import origin_of, set_origin
 
 
 @dataclass(frozen=True)
@@ -51,28 +51,6 @@ class Merged:
         return [owner, *(link for link, own in self.owner.items() if own == owner and link != owner)]
 
 
-def _origin(element: etree._Element) -> FloatArray:
-    """The 4x4 transform of an element's ``<origin>`` (a joint's, a visual's...)."""
-    origin = element.find("origin")
-    matrix = np.eye(4)
-    if origin is not None:
-        roll, pitch, yaw = (float(v) for v in origin.get("rpy", "0 0 0").split())
-        matrix = np.asarray(euler_matrix(roll, pitch, yaw, "sxyz"), dtype=np.float64)  # type: ignore[no-untyped-call]
-        matrix[:3, 3] = [float(v) for v in origin.get("xyz", "0 0 0").split()]
-    return matrix
-
-
-def set_origin(element: etree._Element, matrix: FloatArray) -> None:
-    """Write ``matrix`` as ``element``'s ``<origin>`` (URDF's fixed-axis roll, pitch, yaw)."""
-    origin = element.find("origin")
-    if origin is None:
-        origin = etree.Element("origin")
-        element.insert(0, origin)
-    origin.set("xyz", " ".join(repr(float(v)) for v in matrix[:3, 3]))
-    rpy = euler_from_matrix(matrix, "sxyz")  # type: ignore[no-untyped-call]
-    origin.set("rpy", " ".join(repr(float(v)) for v in rpy))
-
-
 def _inertial(element: etree._Element) -> tuple[float, FloatArray, FloatArray]:
     """A ``<link>``'s mass, centre of mass (link frame) and inertia tensor about that centre in
     the link's axes; without ``<inertial>``, PyBullet's: :data:`BARE_LINK_MASS` and a unit
@@ -87,7 +65,7 @@ def _inertial(element: etree._Element) -> tuple[float, FloatArray, FloatArray]:
     if tensor is not None:
         values.update({key: float(tensor.get(key, 0.0)) for key in INERTIA_KEYS})
     matrix = inertia_tensor(values)
-    frame = _origin(inertial)
+    frame = origin_of(inertial)
     rotation = frame[:3, :3]
     return mass, frame[:3, 3].copy(), rotation @ matrix @ rotation.T
 
@@ -140,7 +118,7 @@ def merge_fixed(urdf: bytes) -> tuple[bytes, Merged]:
         target = links[owner]
         for tag in ("visual", "collision"):
             for child in element.findall(tag):
-                set_origin(child, offset @ _origin(child))
+                set_origin(child, offset @ origin_of(child))
                 target.append(child)
         mass, centre, tensor = _inertial(element)  # a massless link's inertia counts too (Franka's link8)
         turn = offset[:3, :3]
@@ -160,7 +138,7 @@ def merge_fixed(urdf: bytes) -> tuple[bytes, Merged]:
         name = str(parent.get("link"))
         if merged.owner[name] != name:
             parent.set("link", merged.owner[name])
-            set_origin(joint, merged.offset[name] @ _origin(joint))
+            set_origin(joint, merged.offset[name] @ origin_of(joint))
     return bytes(etree.tostring(root)), merged
 
 
@@ -181,7 +159,7 @@ def _where(root: etree._Element) -> Merged:
         parent = str(joint.find("parent").get("link"))  # type: ignore[union-attr]
         if parent not in owner:
             place(parent)
-        owner[link], offset[link] = owner[parent], offset[parent] @ _origin(joint)
+        owner[link], offset[link] = owner[parent], offset[parent] @ origin_of(joint)
 
     for element in root.findall("link"):
         name = str(element.get("name"))
@@ -204,4 +182,4 @@ def unmerged(urdf: bytes) -> Merged:
     )
 
 
-__all__ = ["Merged", "merge_fixed", "set_origin", "unmerged"]
+__all__ = ["Merged", "merge_fixed", "unmerged"]

@@ -11,6 +11,7 @@ multiplier plus the offset, as its target before every physics step.
 from __future__ import annotations
 
 import logging
+from collections.abc import Collection
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,7 +22,6 @@ from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.robot.statics import joint_inertias
 from armreach_pybullet.engine import engine_output_to_log, pb
 from armreach_pybullet.merge import Merged
-from armreach_pybullet.weld import welded_joints
 
 log = logging.getLogger("armreach.pybullet")
 
@@ -49,9 +49,10 @@ class Layout:
     held_slots: list[int]
 
 
-def read_layout(cid: int, body: int, robot: RobotModel, merged: Merged) -> Layout:
+def read_layout(cid: int, body: int, robot: RobotModel, merged: Merged, welded: Collection[str]) -> Layout:
     """The indices of ``robot``'s joints and links in PyBullet body ``body``, every link merged
-    into another (``merged``) at the index of the link it is part of.
+    into another (``merged``) at the index of the link it is part of; the held joints in
+    ``welded`` are fixed joints there.
 
     Raises:
         ArmReachError: PyBullet did not create an actuated or held joint, or a link.
@@ -63,7 +64,6 @@ def read_layout(cid: int, body: int, robot: RobotModel, merged: Merged) -> Layou
         joint_index[info[1].decode()] = i
         link_index[info[12].decode()] = i
     held = robot.held_joints
-    welded = welded_joints(robot)
     slots = [i for i, j in enumerate(held) if j.name not in welded]
     moving = (*robot.joint_names, *(held[i].name for i in slots))
     missing = [name for name in moving if name not in joint_index]

@@ -9,7 +9,7 @@ from armreach_core.env import ArmEnv
 
 _DOC = """The bundled arm with a parallel gripper picks a cube from a table and lifts it 10 cm.
 
-    Made with ``gym.make("armreach/Grasp-v2", backend="pybullet", render_mode=None)``
+    Made with ``gym.make("armreach/Grasp-v3", backend="pybullet", render_mode=None)``
     after ``import armreach_core`` (the ``armreach-grasp`` distribution registers it), or
     by calling this class with the same keyword arguments. The robot is ``ar6-gripper``:
     ar6 with a box palm on ``tool0`` and two prismatic fingers (0–40 mm each, 20 N),
@@ -80,7 +80,7 @@ _DOC = """The bundled arm with a parallel gripper picks a cube from a table and 
     ``object_range``, ``object_yaw`` and ``goal_conditioned``
     (:class:`armreach_grasp.task.GraspTask`). Another URDF needs ``ee_link`` and
     ``tool_joints`` (its finger joints), e.g.
-    ``gym.make("armreach/Grasp-v2", urdf=..., ee_link="tcp", tool_joints=["f1", "f2"])``.
+    ``gym.make("armreach/Grasp-v3", urdf=..., ee_link="tcp", tool_joints=["f1", "f2"])``.
 
     ## Version history
 

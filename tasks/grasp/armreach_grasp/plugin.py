@@ -29,15 +29,22 @@ def armreach_register_tasks(register: Register) -> None:
     register(
         TaskSpec(
             name="grasp",
-            env_id="armreach/Grasp-v2",
+            env_id="armreach/Grasp-v3",
             deprecated_ids={
                 "armreach/Grasp-v0": {
                     "engine_drag": True,
                     "iterative_solver": True,
                     "merge_fixed_links": False,
                     "joint_velocity_limits": False,
+                    "rigid_held_joints": False,
+                    "bounded_ground": False,
                 },
-                "armreach/Grasp-v1": {"joint_velocity_limits": False},
+                "armreach/Grasp-v1": {
+                    "joint_velocity_limits": False,
+                    "rigid_held_joints": False,
+                    "bounded_ground": False,
+                },
+                "armreach/Grasp-v2": {"rigid_held_joints": False, "bounded_ground": False},
             },
             load="armreach_grasp.task:GraspTask",
             robot=ROBOT,

@@ -60,7 +60,7 @@ def _yaw(quaternion: FloatArray) -> float:
 
 
 class ScriptedGrasp:
-    """The four-phase pick of the module docstring, for one env (``env.unwrapped`` of Grasp-v2).
+    """The four-phase pick of the module docstring, for one env (``env.unwrapped`` of Grasp-v3).
 
     Args:
         env: the grasp env (its ``robot``, ``task`` and ``max_joint_step`` are read).
@@ -151,7 +151,7 @@ def success_rate(backend: str, episodes: int = 100, first_seed: int = 0) -> dict
     """Success rate of the scripted grasp over ``episodes`` seeded episodes (seeds from ``first_seed``)."""
     import gymnasium as gym
 
-    env = gym.make("armreach/Grasp-v2", backend=backend)
+    env = gym.make("armreach/Grasp-v3", backend=backend)
     results = [run_episode(env, seed) for seed in range(first_seed, first_seed + episodes)]
     env.close()
     successes = [r for r in results if r["success"]]

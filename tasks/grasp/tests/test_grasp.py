@@ -42,7 +42,7 @@ def backend(request):
 
 @pytest.fixture
 def env(backend):
-    env = gym.make("armreach/Grasp-v2", backend=backend)
+    env = gym.make("armreach/Grasp-v3", backend=backend)
     yield env
     env.close()
 
@@ -172,7 +172,7 @@ def test_dense_reward_without_info_is_an_error_and_options_are_checked(backend):
 
 @pytest.mark.parametrize("reward_type", ["sparse", "dense"])
 def test_goal_conditioned_reward_matches_step_reward(backend, reward_type):
-    env = gym.make("armreach/Grasp-v2", backend=backend, goal_conditioned=True, reward_type=reward_type)
+    env = gym.make("armreach/Grasp-v3", backend=backend, goal_conditioned=True, reward_type=reward_type)
     unwrapped = env.unwrapped
     obs, _ = env.reset(seed=3)
     assert set(obs) == {"observation", "achieved_goal", "desired_goal"} and obs["observation"].shape == (35,)
@@ -199,7 +199,7 @@ def test_goal_conditioned_reward_matches_step_reward(backend, reward_type):
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_scripted_grasp_succeeds(backend, seed):
-    env = gym.make("armreach/Grasp-v2", backend=backend)
+    env = gym.make("armreach/Grasp-v3", backend=backend)
     result = run_episode(env, seed)
     assert result["success"], f"{backend} seed {seed}: {result['info']}"
     assert result["info"]["lift"] > 0.07
@@ -213,7 +213,7 @@ def test_scripted_grasp_succeeds(backend, seed):
 
 
 def test_without_closing_the_gripper_the_cube_stays_on_the_table(backend):
-    env = gym.make("armreach/Grasp-v2", backend=backend)
+    env = gym.make("armreach/Grasp-v3", backend=backend)
     unwrapped = env.unwrapped
     policy = grasp.scripted.ScriptedGrasp(unwrapped)
     obs, _ = env.reset(seed=0)
@@ -229,7 +229,7 @@ def test_without_closing_the_gripper_the_cube_stays_on_the_table(backend):
 @needs_both
 @pytest.mark.parametrize("seed", [0, 3])
 def test_object_pose_parity_during_a_scripted_grasp(seed):
-    results = {name: run_episode(gym.make("armreach/Grasp-v2", backend=name), seed) for name in PAIR}
+    results = {name: run_episode(gym.make("armreach/Grasp-v3", backend=name), seed) for name in PAIR}
     first, second = (results[name]["object"] for name in PAIR)
     assert all(r["success"] for r in results.values())
     steps = min(len(first), len(second))

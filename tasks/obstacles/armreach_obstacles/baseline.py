@@ -40,7 +40,7 @@ class PlannerAgent:
 
 
 def evaluate_planner(backend: str, episodes: int = 100, seed: int = 10_000, **env_kwargs: Any) -> EvaluationResult:
-    """``episodes`` seeded episodes of the planner on ``armreach/ReachAround-v2`` (200-step limit)."""
+    """``episodes`` seeded episodes of the planner on ``armreach/ReachAround-v3`` (200-step limit)."""
     kwargs = {"max_episode_steps": 200, **env_kwargs}
     result = run_episodes(lambda: ArmEnv("reach-around", backend=backend, **kwargs), PlannerAgent(), episodes, seed)
     result.source = PlannerAgent().describe()

@@ -9,7 +9,7 @@ from armreach_core.env import ArmEnv
 
 _DOC = """The end effector must reach a random target without touching the obstacles in its way.
 
-    Made with ``gym.make("armreach/ReachAround-v2", backend="pybullet", render_mode=None)``
+    Made with ``gym.make("armreach/ReachAround-v3", backend="pybullet", render_mode=None)``
     after ``import armreach_core`` (the ``armreach-obstacles`` distribution registers it),
     or by calling this class with the same keyword arguments. Runs on every backend that
     implements :meth:`~armreach_core.backend.Scene.add_shape` and

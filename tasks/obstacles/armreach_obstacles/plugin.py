@@ -8,7 +8,7 @@ from pathlib import Path
 from armreach_core import TaskSpec, hookimpl
 from armreach_core.plugins.specs import Register
 
-#: The episode length of ``armreach/ReachAround-v2`` (the planned reference needs about 40-120 steps).
+#: The episode length of ``armreach/ReachAround-v3`` (the planned reference needs about 40-120 steps).
 MAX_EPISODE_STEPS = 200
 
 
@@ -23,15 +23,22 @@ def armreach_register_tasks(register: Register) -> None:
     register(
         TaskSpec(
             name="reach-around",
-            env_id="armreach/ReachAround-v2",
+            env_id="armreach/ReachAround-v3",
             deprecated_ids={
                 "armreach/ReachAround-v0": {
                     "engine_drag": True,
                     "iterative_solver": True,
                     "merge_fixed_links": False,
                     "joint_velocity_limits": False,
+                    "rigid_held_joints": False,
+                    "bounded_ground": False,
                 },
-                "armreach/ReachAround-v1": {"joint_velocity_limits": False},
+                "armreach/ReachAround-v1": {
+                    "joint_velocity_limits": False,
+                    "rigid_held_joints": False,
+                    "bounded_ground": False,
+                },
+                "armreach/ReachAround-v2": {"rigid_held_joints": False, "bounded_ground": False},
             },
             load="armreach_obstacles.task:ReachAroundTask",
             max_episode_steps=MAX_EPISODE_STEPS,

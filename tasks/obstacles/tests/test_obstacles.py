@@ -23,7 +23,7 @@ from armreach_core.diagnostics.installed import installed_backends
 
 HERE = Path(__file__).resolve().parents[1]
 BACKENDS = installed_backends()
-ENV_ID = "armreach/ReachAround-v2"
+ENV_ID = "armreach/ReachAround-v3"
 pytestmark = pytest.mark.skipif(not BACKENDS, reason="no physics backend installed")
 
 

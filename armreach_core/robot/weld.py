@@ -1,0 +1,82 @@
+"""Held joints welded where they are held, in the URDF every engine loads.
+
+A held joint that follows no actuated joint (a gripper's fingers, a jaw, a second arm, a
+head, a wheel, and mimic joints of those) is aimed at one position for the whole episode:
+the robot's own controller, which the URDF does not describe, keeps it there. Held by a
+position motor with the URDF's effort limit it is still a degree of freedom of each engine
+and a row of its solver, and where that limit is below what gravity puts on the joint
+(Baxter's and PR2's second arms, which lean on springs or a gravity compensation the URDF
+leaves out) the limb sinks until it lies on the ground: Baxter's right wrist sank 0.24 m, to
+7 cm below the ground, on both engines, and its contacts took two thirds of each PyBullet
+physics step. Welded (:func:`weld`), the joint is a fixed joint whose origin is the
+joint's frame at its held position: its links sit exactly where they are held, the arm
+carries the same masses, and both engines load the same rigid body.
+
+Mimic joints of an actuated joint are never welded: they move with their master.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+
+import numpy as np
+from lxml import etree
+from trimesh.transformations import euler_from_matrix, euler_matrix
+
+from armreach_core.robot.kinematics import joint_motion
+from armreach_core.robot.model import FloatArray, RobotModel
+
+
+def rigid_joints(robot: RobotModel) -> Mapping[str, float]:
+    """The held joints of ``robot`` that follow no actuated joint, by name, with where each is held."""
+    actuated = set(robot.joint_names)
+    return MappingProxyType(
+        {j.name: j.position for j in robot.held_joints if j.mimic is None or j.mimic.joint not in actuated}
+    )
+
+
+def weld(urdf: bytes, robot: RobotModel, joints: Mapping[str, float]) -> bytes:
+    """``urdf`` (``robot``'s, as an engine loads it) with each joint of ``joints`` made a fixed
+    joint whose origin is the joint's frame at its position there."""
+    if not joints:
+        return urdf
+    frames = {joint.name: joint for joint in robot.tree_joints}
+    root = etree.fromstring(urdf)
+    for joint in root.findall("joint"):  # the robot's joints, not a <transmission>'s
+        name = str(joint.get("name"))
+        if name not in joints:
+            continue
+        tree = frames[name]
+        held: FloatArray = tree.origin @ joint_motion(tree.kind, tree.axis, np.asarray(joints[name]))
+        set_origin(joint, held)
+        joint.set("type", "fixed")
+        for tag in ("axis", "limit", "mimic", "dynamics", "calibration", "safety_controller"):
+            for element in joint.findall(tag):
+                joint.remove(element)
+    return bytes(etree.tostring(root))
+
+
+def origin_of(element: etree._Element) -> FloatArray:
+    """The 4x4 transform of an element's ``<origin>`` (a joint's, a visual's...)."""
+    origin = element.find("origin")
+    matrix = np.eye(4)
+    if origin is not None:
+        roll, pitch, yaw = (float(v) for v in origin.get("rpy", "0 0 0").split())
+        matrix = np.asarray(euler_matrix(roll, pitch, yaw, "sxyz"), dtype=np.float64)  # type: ignore[no-untyped-call]
+        matrix[:3, 3] = [float(v) for v in origin.get("xyz", "0 0 0").split()]
+    return matrix
+
+
+def set_origin(element: etree._Element, matrix: FloatArray) -> None:
+    """Write ``matrix`` as ``element``'s ``<origin>`` (URDF's fixed-axis roll, pitch, yaw)."""
+    origin = element.find("origin")
+    if origin is None:
+        origin = etree.Element("origin")
+        element.insert(0, origin)
+    origin.set("xyz", " ".join(repr(float(v)) for v in matrix[:3, 3]))
+    rpy = euler_from_matrix(matrix, "sxyz")  # type: ignore[no-untyped-call]
+    origin.set("rpy", " ".join(repr(float(v)) for v in rpy))
+
+
+__all__ = ["origin_of", "rigid_joints", "set_origin", "weld"]
