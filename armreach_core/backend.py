@@ -5,11 +5,10 @@ A backend adapts one engine to armreach and holds no task logic. It is built fro
 names: joint vectors are always in ``robot.joint_names`` order. Units are SI, z is up,
 and quaternions (where a backend exposes orientation) are ``(w, x, y, z)``.
 
-Tasks see a backend as a :class:`Scene`: markers, and for tasks that handle objects
-(grasping) *bodies*: boxes added to the world by name, free or fixed, whose pose and
-velocity a backend sets and reads, and contacts and friction addressed by robot link or
-body name; and fixed *shapes* (boxes, spheres, cylinders) moved between episodes, with the
-clearance of every link from them (obstacles).
+Tasks see a backend as a :class:`Scene`: markers; *bodies* (grasping): boxes added by
+name, free or fixed, whose pose and velocity a backend sets and reads, with contacts and
+friction by robot link or body name; fixed *shapes* (boxes, spheres, cylinders) moved
+between episodes, with every link's clearance from them (obstacles).
 """
 
 from __future__ import annotations
@@ -25,6 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.errors import ConfigError
+from armreach_core.robot.hulls import MAX_HULL_VERTICES
 from armreach_core.robot.model import FloatArray, RobotModel
 
 
@@ -39,16 +39,16 @@ class PhysicsConfig:
         self_collision: collide non-adjacent links of the arm with each other (default off).
         inertia_from_file: use the URDF's inertia tensors (default on), not the engine's guesses.
         ground: add a static ground plane at z = 0 that collides with the arm.
-        visuals: load the URDF's visual meshes (default on; off in an env that never renders, where
-            a backend may skip them to save memory). Physics is the same either way.
+        visuals: load the URDF's visual meshes (off in an env that never renders): no physics change.
         engine_drag: keep the drag an engine puts on every moving link (PyBullet's 0.04), no URDF's.
         iterative_solver: solve motors and contacts iteratively (PyBullet: Gauss-Seidel, not
             Dantzig's direct solver; MuJoCo: no change); on, with ``engine_drag``, before ``Reach-v2``.
         merge_fixed_links: load a link fixed to another as part of it (PyBullet: faster, the same bodies).
         rigid_held_joints: weld each held joint that follows no actuated joint where it is held,
             on every engine (:mod:`armreach_core.robot.weld`); off before ``Reach-v4``.
-        bounded_ground: the ground is a slab, not Bullet's infinite plane (PyBullet: faster;
-            MuJoCo: no change); off before ``Reach-v4``.
+        bounded_ground: PyBullet's ground is a slab, not an infinite plane; off before ``Reach-v4``.
+        hull_vertices: the most vertices a collision mesh's hull keeps, on every engine
+            (:mod:`armreach_core.robot.hulls`); ``None`` before ``Reach-v4``.
     """
 
     timestep: float = 1.0 / 240.0
@@ -63,6 +63,7 @@ class PhysicsConfig:
     merge_fixed_links: bool = True
     rigid_held_joints: bool = True
     bounded_ground: bool = True
+    hull_vertices: int | None = MAX_HULL_VERTICES
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.timestep) and 0.0 < self.timestep <= 0.1):
@@ -71,6 +72,8 @@ class PhysicsConfig:
             raise ConfigError(f"substeps={self.substeps!r} is out of range; use an integer in [1, 1000]")
         if len(self.gravity) != 3 or not all(math.isfinite(g) for g in self.gravity):
             raise ConfigError(f"gravity={self.gravity!r} must be three finite numbers")
+        if self.hull_vertices is not None and not (isinstance(self.hull_vertices, int) and self.hull_vertices >= 4):
+            raise ConfigError(f"hull_vertices={self.hull_vertices!r} must be an integer >= 4, or None (no cap)")
 
     @property
     def control_dt(self) -> float:
@@ -85,12 +88,9 @@ def stable_damping(damping: npt.ArrayLike, inertia: npt.ArrayLike, timestep: flo
     Where ``timestep * D / M_ii > 1`` (a light joint with URDF damping: TALOS's gripper, ar6's last
     wrist) that torque reverses the joint within a step, and once the joint's motor is at its
     effort the joint rings with growing amplitude until a limit stops it. Every backend bounds
-    each motor joint's ``D`` by its ``M_ii / timestep`` at home, the same numbers from the same URDF.
-
-    Args:
-        damping: URDF dampings (N m s/rad or N s/m), one per joint.
-        inertia: the diagonal of the joint-space mass matrix at home, one per joint.
-        timestep: the physics step (s).
+    each motor joint's ``D`` by its ``M_ii / timestep`` at home, the same numbers from the same URDF:
+    ``damping`` (N m s/rad or N s/m) and ``inertia`` (the diagonal of the joint-space mass
+    matrix at home) one per joint, ``timestep`` the physics step (s).
     """
     return np.minimum(np.asarray(damping, dtype=np.float64), np.asarray(inertia, dtype=np.float64) / timestep)
 

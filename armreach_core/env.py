@@ -64,7 +64,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             joint limits, default 0 (the paper's reward). Training shaping: a policy trained
             with clipping and a penalty also keeps within the limits under the paper's rule.
         self_collision, inertia_from_file, engine_drag, iterative_solver, merge_fixed_links,
-        rigid_held_joints, bounded_ground:
+        rigid_held_joints, bounded_ground, hull_vertices:
             :class:`~armreach_core.backend.PhysicsConfig`'s (older ids: see ``deprecated_ids``).
         camera: a :class:`~armreach_core.backend.Camera` for rendering.
         tool_joints: joints off the arm's chain to actuate too (a gripper's fingers);
@@ -113,6 +113,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         merge_fixed_links: bool = True,
         rigid_held_joints: bool = True,
         bounded_ground: bool = True,
+        hull_vertices: int | None = PhysicsConfig.hull_vertices,
         camera: Camera | None = None,
         tool_joints: tuple[str, ...] | list[str] | None = None,
         allow_external_meshes: bool | None = None,
@@ -182,6 +183,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             merge_fixed_links=merge_fixed_links,
             rigid_held_joints=rigid_held_joints,
             bounded_ground=bounded_ground,
+            hull_vertices=hull_vertices,
         )
         #: Whether joint targets move at most at the URDF's velocity limits (``joint_velocity_limits``).
         self.joint_velocity_limits = bool(joint_velocity_limits)
@@ -261,11 +263,9 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         return step if self.velocity_step is None else np.minimum(step, self.velocity_step)
 
     def joint_targets(self, action: npt.NDArray[np.float64], q: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """The task's joint targets for ``action`` (in [-1, 1]) from angles ``q``, each within :attr:`velocity_step`.
-
-        The targets before the joint limits: :meth:`step` clips them into the limits (or ends the
-        episode there); a real arm's loop does the same through its safety layer.
-        """
+        """The task's joint targets for ``action`` (in [-1, 1]) from angles ``q``, each within
+        :attr:`velocity_step`, before the joint limits: :meth:`step` clips them into the limits
+        (or ends the episode there); a real arm's loop does the same through its safety layer."""
         target = self.task.joint_targets(action, q, self.max_joint_step)
         cap = self._velocity_cap
         if cap is None:

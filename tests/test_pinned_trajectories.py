@@ -158,6 +158,7 @@ def test_engine_drag_gives_the_dynamics_of_the_older_ids_bit_for_bit(seed: int) 
         "joint_velocity_limits": False,
         "rigid_held_joints": False,
         "bounded_ground": False,
+        "hull_vertices": None,
     }
     want = json.loads(ENGINE_DRAG_PINNED.read_text())[f"pybullet/{seed}"]
     got = trajectory("pybullet", seed, **older)
@@ -176,7 +177,7 @@ def test_reach_v3_keeps_pybullets_ground_plane_bit_for_bit(seed: int) -> None:
     from armreach_core.plugins.lookup import task_spec
 
     older = task_spec("reach").deprecated_ids["armreach/Reach-v3"]
-    assert older == {"rigid_held_joints": False, "bounded_ground": False}
+    assert older == {"rigid_held_joints": False, "bounded_ground": False, "hull_vertices": None}
     want = json.loads(PLANE_GROUND_PINNED.read_text())[f"pybullet/{seed}"]
     got = trajectory("pybullet", seed, **older)
     assert got["ends"] == want["ends"]

@@ -32,6 +32,7 @@ def armreach_register_tasks(register: Register) -> None:
                     "joint_velocity_limits": False,
                     "rigid_held_joints": False,
                     "bounded_ground": False,
+                    "hull_vertices": None,
                 },
                 "armreach/Reach-v1": {
                     "engine_drag": True,
@@ -40,13 +41,19 @@ def armreach_register_tasks(register: Register) -> None:
                     "joint_velocity_limits": False,
                     "rigid_held_joints": False,
                     "bounded_ground": False,
+                    "hull_vertices": None,
                 },
                 "armreach/Reach-v2": {
                     "joint_velocity_limits": False,
                     "rigid_held_joints": False,
                     "bounded_ground": False,
+                    "hull_vertices": None,
                 },
-                "armreach/Reach-v3": {"rigid_held_joints": False, "bounded_ground": False},
+                "armreach/Reach-v3": {
+                    "rigid_held_joints": False,
+                    "bounded_ground": False,
+                    "hull_vertices": None,
+                },
             },
             load="armreach_core.tasks.reach.task:ReachTask",
             robot=DEFAULT_ROBOT,

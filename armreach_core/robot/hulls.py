@@ -7,10 +7,14 @@ envs that render; per-arm figures and the command in docs/arms.md). A mesh file 
 several parts gets one hull over all of them, as MuJoCo builds it.
 
 A hull of a finely tessellated part keeps thousands of vertices, and Bullet's convex
-collision walks all of them every physics step. So the hull is simplified to the fewest of
-its own vertices (taken farthest-first) whose hull leaves no vertex of the full one more
-than :data:`HULL_TOLERANCE` outside: a few hundred vertices at most on the corpus arms, and
-the collision shape shrinks by at most :data:`HULL_TOLERANCE` (docs/arms.md has the counts).
+collision walks all of them for each support point it asks for: once a physics step against
+a plane, tens of times a contact against anything else. So the hull is simplified to the
+fewest of its own vertices (taken farthest-first) whose hull leaves no vertex of the full one
+more than :data:`HULL_TOLERANCE` outside, and at most :data:`MAX_HULL_VERTICES` of them
+(``PhysicsConfig.hull_vertices``): 1 mm is finer than a large smooth part needs (a KUKA
+KR120's, a Vega's arm kept 546-2,763 vertices for it, and their contacts with the ground
+took 64 µs of a 65 µs physics step); capped, such a part's hull lies at most a few mm inside
+the full one (docs/arms.md has the counts and the distances).
 
 Hulls live in ``$XDG_CACHE_HOME/armreach/hulls`` (default ``~/.cache``), keyed by the
 mesh file's name and contents; a file trimesh cannot read, or one whose hull is
@@ -38,6 +42,8 @@ log = logging.getLogger("armreach.hulls")
 HULL_TOLERANCE = 1e-3
 #: Hulls with at most this many vertices are kept whole.
 SMALL_HULL = 64
+#: The most vertices a simplified hull keeps (``PhysicsConfig.hull_vertices``'s default).
+MAX_HULL_VERTICES = 128
 
 
 def cache_dir(kind: str) -> Path:
@@ -66,9 +72,11 @@ def file_key(path: Path) -> str:
 _KEYS: dict[tuple[str, int, int], str] = {}
 
 
-def convex_hull(path: Path) -> Path:
-    """An ``.obj`` of the convex hull of the mesh at ``path`` (cached), or ``path`` itself if it has none."""
-    out = cache_dir("hulls") / f"{path.stem}-{file_key(path)}-{HULL_TOLERANCE * 1e3:g}mm.obj"
+def convex_hull(path: Path, max_vertices: int | None = MAX_HULL_VERTICES) -> Path:
+    """An ``.obj`` of the convex hull of the mesh at ``path`` (cached), simplified
+    (:func:`simplified`), or ``path`` itself if it has none."""
+    cap = f"-{max_vertices}v" if max_vertices is not None else ""
+    out = cache_dir("hulls") / f"{path.stem}-{file_key(path)}-{HULL_TOLERANCE * 1e3:g}mm{cap}.obj"
     if out.is_file():
         return out
     import trimesh
@@ -81,28 +89,33 @@ def convex_hull(path: Path) -> Path:
     if len(hull.vertices) < 4 or len(hull.faces) < 4:
         log.info("collision mesh %s kept as it is: its convex hull is degenerate", path)
         return path
-    return write_obj(simplified(hull, HULL_TOLERANCE), out)
+    return write_obj(simplified(hull, HULL_TOLERANCE, max_vertices), out)
 
 
-def simplified(hull: Any, tolerance: float) -> Any:
+def simplified(hull: Any, tolerance: float, max_vertices: int | None = None) -> Any:
     """The hull of the fewest farthest-first vertices of ``hull`` that leave none of its vertices
-    more than ``tolerance`` outside (``hull`` itself when it is small or nothing smaller does)."""
+    more than ``tolerance`` outside, and at most ``max_vertices`` of them (``hull`` itself when
+    it is small or nothing smaller does)."""
     import numpy as np
     import trimesh
 
     vertices = np.asarray(hull.vertices, dtype=np.float64)
-    if len(vertices) <= SMALL_HULL:
+    limit = len(vertices) if max_vertices is None else min(len(vertices), max_vertices)
+    if len(vertices) <= min(SMALL_HULL, limit):
         return hull
     order = _farthest_first(vertices)
-    count = SMALL_HULL // 2
-    while count < len(vertices):
+    count = min(SMALL_HULL // 2, limit)
+    while count < limit:
         candidate = trimesh.Trimesh(vertices[order[:count]]).convex_hull
         if len(candidate.faces) >= 4:  # how far each vertex lies outside the candidate (> 0: outside)
             outside = -trimesh.proximity.signed_distance(candidate, vertices)  # type: ignore[no-untyped-call]
             if float(outside.max()) <= tolerance:
                 return candidate
         count = int(count * 1.5)
-    return hull
+    if limit == len(vertices):
+        return hull
+    candidate = trimesh.Trimesh(vertices[order[:limit]]).convex_hull
+    return candidate if len(candidate.faces) >= 4 else hull
 
 
 def _farthest_first(points: Any) -> Any:
@@ -131,8 +144,9 @@ def write_obj(mesh: Any, out: Path) -> Path:
     return out
 
 
-def simulation_urdf(robot: RobotModel, *, visuals: bool) -> bytes:
-    """The robot's resolved URDF with collision meshes replaced by their hulls and, unless
+def simulation_urdf(robot: RobotModel, *, visuals: bool, max_vertices: int | None = MAX_HULL_VERTICES) -> bytes:
+    """The robot's resolved URDF with collision meshes replaced by their hulls (of at most
+    ``max_vertices`` vertices: :func:`convex_hull`) and, unless
     ``visuals``, without ``<visual>`` elements (an env that never renders needs none), and
     with inertias no rigid body has repaired and frames (links without ``<inertial>`` fixed to
     another) massless (:mod:`armreach_core.robot.inertia`), and without the collision geometry
@@ -149,7 +163,7 @@ def simulation_urdf(robot: RobotModel, *, visuals: bool) -> bytes:
         for mesh in collision.iter("mesh"):
             filename = mesh.get("filename", "")
             if filename and Path(filename).is_file():
-                mesh.set("filename", str(convex_hull(Path(filename))))
+                mesh.set("filename", str(convex_hull(Path(filename), max_vertices)))
     if not visuals:
         for link in root.iter("link"):
             for visual in link.findall("visual"):

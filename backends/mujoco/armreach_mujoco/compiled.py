@@ -87,7 +87,7 @@ _cache_lock = threading.Lock()
 def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras, native: bool = False) -> CompiledModel:
     """Build and compile a model (uncached: use :func:`compiled_model`); ``native``: MuJoCo's position actuators."""
     welded = rigid_joints(robot) if physics.rigid_held_joints else {}
-    spec = spec_from_urdf(robot, physics.visuals, welded)
+    spec = spec_from_urdf(robot, physics.visuals, welded, physics.hull_vertices)
     world.set_options(spec, physics)
     if native:
         native_motor.set_options(spec)

@@ -17,7 +17,7 @@ import numpy as np
 from lxml import etree
 
 from armreach_core.errors import URDFError
-from armreach_core.robot.hulls import simulation_urdf
+from armreach_core.robot.hulls import MAX_HULL_VERTICES, simulation_urdf
 from armreach_core.robot.meshes import readable
 from armreach_core.robot.model import RobotModel
 from armreach_core.robot.statics import BARE_LINK_MASS, bare_mass
@@ -28,15 +28,20 @@ from armreach_mujoco.engine import mujoco
 NATIVE_MESHES = (".stl", ".obj", ".msh")
 
 
-def urdf_for_mujoco(robot: RobotModel, visuals: bool = True, welded: Mapping[str, float] | None = None) -> str:
+def urdf_for_mujoco(
+    robot: RobotModel,
+    visuals: bool = True,
+    welded: Mapping[str, float] | None = None,
+    max_vertices: int | None = MAX_HULL_VERTICES,
+) -> str:
     """The robot's resolved URDF with readable mesh paths and MuJoCo's compiler block.
 
     Collision meshes are their convex hulls (what MuJoCo collides anyway) and, without
     ``visuals``, there are no visual meshes (:func:`armreach_core.robot.hulls.simulation_urdf`).
     The held joints in ``welded`` are fixed joints at the positions it gives
-    (:mod:`armreach_core.robot.weld`).
+    (:mod:`armreach_core.robot.weld`); hulls keep at most ``max_vertices`` vertices.
     """
-    urdf = weld(simulation_urdf(robot, visuals=visuals), robot, welded or {})
+    urdf = weld(simulation_urdf(robot, visuals=visuals, max_vertices=max_vertices), robot, welded or {})
     root = etree.fromstring(readable(urdf, NATIVE_MESHES))
     for old in root.findall("mujoco"):
         root.remove(old)
@@ -60,7 +65,12 @@ def links_without_inertial(robot: RobotModel) -> list[str]:
     return [link for link in robot.link_names if links[link].inertial is None and bare_mass(robot, link) > 0]
 
 
-def spec_from_urdf(robot: RobotModel, visuals: bool = True, welded: Mapping[str, float] | None = None) -> Any:
+def spec_from_urdf(
+    robot: RobotModel,
+    visuals: bool = True,
+    welded: Mapping[str, float] | None = None,
+    max_vertices: int | None = MAX_HULL_VERTICES,
+) -> Any:
     """An ``MjSpec`` of the robot alone, as MuJoCo imports it, with PyBullet's missing inertials.
 
     PyBullet's URDF reader gives a link without ``<inertial>`` whose joint moves 1 kg and
@@ -69,7 +79,7 @@ def spec_from_urdf(robot: RobotModel, visuals: bool = True, welded: Mapping[str,
     load (:func:`armreach_core.robot.inertia.massless_frames`).
     """
     try:
-        spec = mujoco.MjSpec.from_string(urdf_for_mujoco(robot, visuals, welded))
+        spec = mujoco.MjSpec.from_string(urdf_for_mujoco(robot, visuals, welded, max_vertices))
     except ValueError as exc:  # MuJoCo's URDF importer refused the file
         raise URDFError(
             f"MuJoCo cannot read {robot.urdf_path}: {' '.join(str(exc).split())}; fix the element it names"

@@ -107,7 +107,8 @@ def load_robot(cid: int, robot: RobotModel, physics: PhysicsConfig) -> tuple[int
     with tempfile.TemporaryDirectory(prefix="armreach-") as tmp:
         path = os.path.join(tmp, "robot.urdf")
         with open(path, "wb") as handle:
-            urdf = weld(simulation_urdf(robot, visuals=physics.visuals), robot, welded_joints(robot, physics))
+            urdf = simulation_urdf(robot, visuals=physics.visuals, max_vertices=physics.hull_vertices)
+            urdf = weld(urdf, robot, welded_joints(robot, physics))
             urdf, merged = merge_fixed(urdf) if physics.merge_fixed_links else (urdf, unmerged(urdf))
             handle.write(readable(urdf, PYBULLET_MESHES))
         try:
