@@ -25,15 +25,19 @@ from lxml import etree
 from trimesh.transformations import euler_from_matrix, euler_matrix
 
 from armreach_core.robot.kinematics import joint_motion
-from armreach_core.robot.model import FloatArray, RobotModel
+from armreach_core.robot.model import FloatArray, HeldJoint, RobotModel
+
+
+def follows_actuated(robot: RobotModel, held: HeldJoint) -> bool:
+    """Whether held joint ``held`` is a mimic of a joint ``robot`` actuates, and so moves with it
+    (every engine makes it follow its master). A mimic of another held joint (a gripper's
+    fingers mimicking its held drive joint) follows nothing: it is held where the mimic puts it."""
+    return held.mimic is not None and held.mimic.joint in robot.joint_names
 
 
 def rigid_joints(robot: RobotModel) -> Mapping[str, float]:
     """The held joints of ``robot`` that follow no actuated joint, by name, with where each is held."""
-    actuated = set(robot.joint_names)
-    return MappingProxyType(
-        {j.name: j.position for j in robot.held_joints if j.mimic is None or j.mimic.joint not in actuated}
-    )
+    return MappingProxyType({j.name: j.position for j in robot.held_joints if not follows_actuated(robot, j)})
 
 
 def weld(urdf: bytes, robot: RobotModel, joints: Mapping[str, float]) -> bytes:
@@ -79,4 +83,4 @@ def set_origin(element: etree._Element, matrix: FloatArray) -> None:
     origin.set("rpy", " ".join(repr(float(v)) for v in rpy))
 
 
-__all__ = ["origin_of", "rigid_joints", "set_origin", "weld"]
+__all__ = ["follows_actuated", "origin_of", "rigid_joints", "set_origin", "weld"]

@@ -23,7 +23,7 @@ import numpy.typing as npt
 from armreach_core.backend import PhysicsConfig
 from armreach_core.errors import URDFError
 from armreach_core.robot.model import RobotModel
-from armreach_core.robot.weld import rigid_joints
+from armreach_core.robot.weld import follows_actuated, rigid_joints
 from armreach_mujoco import native as native_motor
 from armreach_mujoco import servo, world
 from armreach_mujoco.engine import log
@@ -114,7 +114,7 @@ def build(robot: RobotModel, physics: PhysicsConfig, extras: Extras, native: boo
     held = [robot.held_joints[i] for i in held_present]
     held_qpos = _index([int(model.jnt_qposadr[model.joint(j.name).id]) for j in held])
     held_qvel = _index([int(model.jnt_dofadr[model.joint(j.name).id]) for j in held])
-    held_servos = _index([k for k, j in enumerate(held) if not servo.follows(robot, j)])
+    held_servos = _index([k for k, j in enumerate(held) if not follows_actuated(robot, j)])
     held_motors = _index([int(motor_id(servo.MOTOR_PREFIX + held[k].name).id) for k in held_servos])
     held_home = robot.held_positions(robot.home)[held_present]
     motor_qpos = np.concatenate((qpos, held_qpos))

@@ -54,6 +54,7 @@ import numpy.typing as npt
 from armreach_core.backend import stable_damping
 from armreach_core.errors import ArmReachError
 from armreach_core.robot.model import HeldJoint, RobotModel
+from armreach_core.robot.weld import follows_actuated
 from armreach_mujoco.cmotor import CompiledMotors, compiled_motors
 from armreach_mujoco.engine import mujoco
 
@@ -82,7 +83,7 @@ def add_servos(spec: Any, robot: RobotModel, motor: AddMotor | None = None, weld
     for held in robot.held_joints:
         if held.name in welded:
             continue
-        if follows(robot, held):
+        if follows_actuated(robot, held):  # a joint equality; else its own motor, held where the mimic puts it
             _follow(spec, robot, held)
         else:
             _prepare(spec, robot, held.name, None)
@@ -90,16 +91,6 @@ def add_servos(spec: Any, robot: RobotModel, motor: AddMotor | None = None, weld
             for equality in list(spec.equalities):  # MuJoCo's importer ties every mimic joint
                 if equality.type == mujoco.mjtEq.mjEQ_JOINT and equality.name1 == held.name:
                     spec.delete(equality)
-
-
-def follows(robot: RobotModel, held: HeldJoint) -> bool:
-    """Whether a held joint follows an actuated master through a joint equality (and has no motor).
-
-    As in PyBullet: a mimic of a joint the arm actuates follows it; a mimic of another held
-    joint (a gripper's fingers mimicking its held drive joint) is held by its own motor, with
-    its own effort, at the position the mimic gives at reset.
-    """
-    return held.mimic is not None and held.mimic.joint in robot.joint_names
 
 
 def _prepare(spec: Any, robot: RobotModel, name: str, damping: float | None) -> None:
@@ -281,7 +272,6 @@ __all__ = [
     "add_motor_tendon",
     "add_servos",
     "cap_damping",
-    "follows",
     "home_inertia",
     "velocity_solref",
 ]

@@ -20,6 +20,7 @@ from armreach_core.backend import stable_damping
 from armreach_core.errors import ArmReachError
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.robot.statics import joint_inertias
+from armreach_core.robot.weld import follows_actuated
 from armreach_pybullet.engine import engine_output_to_log, pb
 from armreach_pybullet.merge import Merged
 
@@ -97,9 +98,7 @@ class Motors:
         self.held_forces = [held[i].effort for i in layout.held_slots]
         actuated = {name: i for i, name in enumerate(robot.joint_names)}
         # mimic joints of actuated masters: (joint, master, multiplier, offset)
-        followers = [
-            (layout.joint_index[j.name], j.mimic) for j in held if j.mimic is not None and j.mimic.joint in actuated
-        ]
+        followers = [(layout.joint_index[j.name], j.mimic) for j in held if follows_actuated(robot, j)]
         self.followers = [index for index, _ in followers]
         self._masters = [self.joints[actuated[m.joint]] for _, m in followers if m is not None]
         self._mimic_gain = np.array([m.multiplier for _, m in followers if m is not None])

@@ -38,14 +38,9 @@ def strong_joints(robot: RobotModel) -> Mapping[str, float]:
     """The held joints that follow no actuated joint and whose motors hold what they carry with
     :data:`WELD_MARGIN` to spare, none of them below a weaker one. Cached per (immutable)
     robot: loading the arm and laying out its motors both ask."""
-    actuated = set(robot.joint_names)
     loads = _gravity_loads(robot, [j.name for j in robot.held_joints])
-    strong = {
-        joint.name
-        for joint in robot.held_joints
-        if (joint.mimic is None or joint.mimic.joint not in actuated)
-        and joint.effort >= WELD_MARGIN * loads[joint.name]
-    }
+    candidates = rigid_joints(robot)
+    strong = {j.name for j in robot.held_joints if j.name in candidates and j.effort >= WELD_MARGIN * loads[j.name]}
     # a part welded onto a motor-held part would change how that part gives way: weld a joint
     # only if every held joint between it and the root is welded too
     model = robot.parsed.model
