@@ -251,76 +251,81 @@ FK_BOUNDS_M = {"pybullet": 8.5e-7, "mujoco": 2e-15}
 #: ground a slab, hulls of at most 128 vertices): free-space gaps moved by micrometres but for
 #: Vega (0.197 -> 0.11 mm random) and Franka's IK reach (11.2 -> 15.7 mm, its capped finger
 #: hulls); contact phases and jerk moved with the ground (KR210's biased contact 893 -> 1,060 mm).
+#: The scripted and press rows were measured again once the IK loop aimed at most AIM_LEAD off
+#: the end effector and scaled its steps as a whole: Franka's IK reach 15.7 -> 0.045 mm (seed 1,
+#: no longer chattering on its joint limits), the others' free-space gaps within 0.3 mm
+#: (KR16's press 0.009 -> 0.29 mm the most), some first contacts a few steps earlier on both
+#: engines (Z1's press 33 -> 30, the Finger Edu's 11 -> 7).
 MEASURED: dict[tuple[str, str], Measured] = {
     ("ar6", "random"): Measured(0.0593, 0.0554, 2.62, 0.0929, (137, None)),
     ("ar6", "biased"): Measured(0.0235, 0.0216, 129.0, 1.88, (27, 60)),
-    ("ar6", "scripted"): Measured(0.000578, 0.0173, None, 0.000444, (None, None)),
-    ("ar6", "press"): Measured(0.000987, 0.00508, 1.13, None, (38, 38)),
+    ("ar6", "scripted"): Measured(0.000578, 0.0173, None, 0.00313, (None, None)),
+    ("ar6", "press"): Measured(0.000987, 0.00508, 1.16, None, (38, 38)),
     ("ur3", "random"): Measured(0.0801, 0.0816, 2.3, 0.616, (16, 127)),
     ("ur3", "biased"): Measured(0.00386, 0.00381, 8.4, 1.09, (3, 1)),
-    ("ur3", "scripted"): Measured(0.00383, 0.0336, None, 0.058, (None, None)),
-    ("ur3", "press"): Measured(0.00185, 0.00212, 2.61, None, (2, 2)),
+    ("ur3", "scripted"): Measured(0.00662, 0.0426, None, 0.211, (None, None)),
+    ("ur3", "press"): Measured(0.00185, 0.00212, 4.44, None, (2, 2)),
     ("ur5", "random"): Measured(0.00784, 0.00557, 6.07, 0.581, (12, 13)),
     ("ur5", "biased"): Measured(0.118, 0.399, 19.1, 0.325, (4, 10)),
     ("ur5", "scripted"): Measured(0.000357, 0.0107, None, 0.00913, (None, None)),
-    ("ur5", "press"): Measured(0.00113, 0.00116, 1.45, None, (8, 8)),
+    ("ur5", "press"): Measured(0.00113, 0.00116, 1.06, None, (8, 8)),
     ("ur5-gripper", "random"): Measured(0.00784, 0.00557, 7.58, 0.563, (12, 13)),
     ("ur5-gripper", "biased"): Measured(0.118, 0.399, 19.2, 0.503, (4, 10)),
-    ("ur5-gripper", "scripted"): Measured(0.000286, 0.0107, None, 0.00228, (None, None)),
-    ("ur5-gripper", "press"): Measured(0.00113, 0.00116, 1.45, None, (8, 8)),
+    ("ur5-gripper", "scripted"): Measured(0.000288, 0.0107, None, 0.000396, (None, None)),
+    ("ur5-gripper", "press"): Measured(0.00113, 0.00116, 1.06, None, (8, 8)),
     ("ur10", "random"): Measured(0.00666, 0.00231, 19.5, 0.422, (8, 2)),
     ("ur10", "biased"): Measured(0.00069, 0.000972, 52.6, 1.12, (1, 1)),
     ("ur10", "scripted"): Measured(0.00046, 0.00545, None, 0.00849, (None, None)),
-    ("ur10", "press"): Measured(0.00182, 0.000795, 0.832, None, (5, 5)),
+    ("ur10", "press"): Measured(0.00182, 0.000795, 0.825, None, (5, 5)),
     ("kinova-jaco", "random"): Measured(0.787, 1.11, None, 0.0302, (None, None)),
     ("kinova-jaco", "biased"): Measured(1.42, 2.7, None, 0.0205, (None, None)),
-    ("kinova-jaco", "scripted"): Measured(0.335, 1.8, None, 3.44, (None, None)),
-    ("kinova-jaco", "press"): Measured(0.00505, 0.0476, 2.45, None, (10, 10)),
+    ("kinova-jaco", "scripted"): Measured(0.158, 0.878, None, 0.899, (None, None)),
+    ("kinova-jaco", "press"): Measured(0.00505, 0.0476, 2.06, None, (10, 10)),
     ("z1", "random"): Measured(0.0447, 0.12, None, 0.000568, (None, None)),
     ("z1", "biased"): Measured(0.0129, 0.0242, 32.2, 0.0568, (31, 34)),
-    ("z1", "scripted"): Measured(0.00248, 0.0743, None, 0.0127, (None, None)),
-    ("z1", "press"): Measured(0.00488, 0.00988, 22.7, None, (33, 33)),
+    ("z1", "scripted"): Measured(0.00272, 0.0752, None, 0.00892, (None, None)),
+    ("z1", "press"): Measured(0.00241, 0.00609, 27.5, None, (30, 30)),
     # PyBullet welds so100's jaw (armreach_pybullet.weld), MuJoCo holds it with its motor: the
     # gaps below moved by micrometres (random was 0.0196 mm, 0.16 mrad; press 0.000482 mm)
     ("so100", "random"): Measured(0.0288, 0.145, None, 0.000294, (None, None)),
     ("so100", "biased"): Measured(0.00466, 0.0351, None, 0.000923, (None, None)),
-    ("so100", "scripted"): Measured(0.00214, 0.096, None, 0.05, (None, None)),
-    ("so100", "press"): Measured(0.00194, 0.0109, 2.15, None, (64, 64)),
+    ("so100", "scripted"): Measured(0.00185, 0.106, None, 0.0925, (None, None)),
+    ("so100", "press"): Measured(0.00186, 0.00945, 10.3, None, (64, 64)),
     ("so101", "random"): Measured(0.116, 0.272, 1.09, 0.0162, (None, 189)),
     ("so101", "biased"): Measured(0.0269, 0.0606, 7.9, 1.24, (17, 36)),
-    ("so101", "scripted"): Measured(0.0019, 0.172, None, 0.023, (None, None)),
-    ("so101", "press"): Measured(0.00201, 0.0193, 1.12, None, (15, 15)),
+    ("so101", "scripted"): Measured(0.00188, 0.178, None, 0.0494, (None, None)),
+    ("so101", "press"): Measured(0.00206, 0.0193, 1.67, None, (15, 15)),
     ("xarm7", "random"): Measured(0.0348, 0.0618, None, 0.00171, (None, None)),
     ("xarm7", "biased"): Measured(0.16, 0.112, 10.5, 0.424, (151, 28)),
-    ("xarm7", "scripted"): Measured(0.00197, 0.051, None, 2.16, (None, None)),  # Reach-v1 targets
-    ("xarm7", "press"): Measured(0.000975, 0.00167, 1.26, None, (13, 13)),
+    ("xarm7", "scripted"): Measured(0.00191, 0.051, None, 2.08, (None, None)),  # Reach-v1 targets
+    ("xarm7", "press"): Measured(0.00117, 0.00301, 11.0, None, (13, 13)),
     ("panda", "random"): Measured(0.225, 0.19, 31.1, 0.289, (179, 165)),
     ("panda", "biased"): Measured(0.719, 0.459, None, 0.0313, (None, None)),
-    ("panda", "scripted"): Measured(0.0202, 0.0278, None, 1.72, (None, None)),
-    ("panda", "press"): Measured(0.0185, 0.0258, 5.55, None, (81, 81)),
+    ("panda", "scripted"): Measured(0.0205, 0.0292, None, 1.54, (None, None)),
+    ("panda", "press"): Measured(0.0238, 0.0285, 1.54, None, (82, 82)),
     ("talos-left-arm", "random"): Measured(0.00963, 0.0125, 18.0, 0.724, (8, 7)),
     ("talos-left-arm", "biased"): Measured(0.00777, 0.0115, 3.86, 1.2, (6, 4)),
-    ("talos-left-arm", "scripted"): Measured(0.000987, 0.0277, None, 0.0315, (None, None)),
-    ("talos-left-arm", "press"): Measured(0.00233, 0.00459, 6.88, None, (4, 4)),
+    ("talos-left-arm", "scripted"): Measured(0.000988, 0.0281, None, 0.0709, (None, None)),
+    ("talos-left-arm", "press"): Measured(0.00233, 0.00459, 1.33, None, (4, 4)),
     ("kuka-iiwa", "random"): Measured(0.0296, 0.0178, None, 0.000366, (None, None)),
     ("kuka-iiwa", "biased"): Measured(0.185, 0.185, 3.08, 0.0646, (193, 194)),
-    ("kuka-iiwa", "scripted"): Measured(0.00092, 0.0219, None, 0.0162, (None, None)),
-    ("kuka-iiwa", "press"): Measured(0.0328, 0.0505, 3.39, None, (128, 128)),
+    ("kuka-iiwa", "scripted"): Measured(0.000999, 0.0216, None, 0.0109, (None, None)),
+    ("kuka-iiwa", "press"): Measured(0.0268, 0.0455, 7.6, None, (128, 128)),
     ("franka-panda", "random"): Measured(0.725, 0.896, 7.62, 0.0184, (None, 142)),
     ("franka-panda", "biased"): Measured(0.437, 0.779, 7.02, 0.0203, (None, 179)),
-    ("franka-panda", "scripted"): Measured(15.7, 15.3, None, 0.438, (None, None)),
-    ("franka-panda", "press"): Measured(0.132, 0.113, None, None, (None, None)),
+    ("franka-panda", "scripted"): Measured(0.045, 0.037, None, 0.623, (None, None)),
+    ("franka-panda", "press"): Measured(0.167, 0.306, None, None, (None, None)),
     ("xarm6", "random"): Measured(0.0326, 0.0536, None, 0.000655, (None, None)),
     ("xarm6", "biased"): Measured(0.00919, 0.0359, 1.05, 0.104, (None, 62)),
-    ("xarm6", "scripted"): Measured(0.000551, 0.0294, None, 0.00749, (None, None)),
-    ("xarm6", "press"): Measured(0.000633, 0.00574, 1.4, None, (21, 21)),
+    ("xarm6", "scripted"): Measured(0.000588, 0.0294, None, 0.00835, (None, None)),
+    ("xarm6", "press"): Measured(0.000633, 0.00574, 1.24, None, (21, 21)),
     ("kuka-kr16", "random"): Measured(0.00795, 0.00317, 24.6, 0.25, (8, 6)),
     ("kuka-kr16", "biased"): Measured(0.000436, 0.000788, 101.0, 0.692, (4, 4)),
     ("kuka-kr16", "scripted"): Measured(0.000696, 0.0177, None, 0.0158, (None, None)),
-    ("kuka-kr16", "press"): Measured(0.00885, 0.00322, 15.4, None, (22, 22)),
+    ("kuka-kr16", "press"): Measured(0.293, 0.107, 1.45, None, (22, 22)),
     ("kuka-kr210", "random"): Measured(0.184, 0.22, 226.0, 9.89, (46, 127)),
     ("kuka-kr210", "biased"): Measured(0.00406, 0.00344, 1060.0, 41.1, (22, 51)),
-    ("kuka-kr210", "scripted"): Measured(0.0018, 0.0538, None, 0.416, (None, None)),
+    ("kuka-kr210", "scripted"): Measured(0.00125, 0.047, None, 0.449, (None, None)),
     ("kuka-kr210", "press"): Measured(0.00178, 0.0187, 6.91, None, (181, 181)),
     ("abb-irb140", "random"): Measured(0.037, 0.0227, None, 0.000318, (None, None)),
     ("abb-irb140", "biased"): Measured(0.516, 0.493, None, 0.0155, (None, None)),
@@ -328,52 +333,52 @@ MEASURED: dict[tuple[str, str], Measured] = {
     ("abb-irb140", "press"): Measured(0.0119, 0.00596, None, None, (None, None)),
     ("vega-1u-left", "random"): Measured(0.11, 0.128, None, 0.00247, (None, None)),
     ("vega-1u-left", "biased"): Measured(0.0977, 0.0805, None, 0.00225, (None, None)),
-    ("vega-1u-left", "scripted"): Measured(0.0152, 0.0818, None, 0.0437, (None, None)),
-    ("vega-1u-left", "press"): Measured(0.0128, 0.0203, None, None, (None, None)),
+    ("vega-1u-left", "scripted"): Measured(0.0901, 0.0636, None, 0.107, (None, None)),
+    ("vega-1u-left", "press"): Measured(0.069, 0.0535, None, None, (None, None)),
     ("kuka-kr6", "random"): Measured(0.357, 0.159, 43.4, 0.577, (58, 89)),
     ("kuka-kr6", "biased"): Measured(0.00665, 0.00459, 49.4, 0.677, (18, 41)),
-    ("kuka-kr6", "scripted"): Measured(0.00966, 0.0441, None, 1.19, (None, None)),
-    ("kuka-kr6", "press"): Measured(0.00187, 0.00145, 1.14, None, (62, 62)),
+    ("kuka-kr6", "scripted"): Measured(0.021, 0.0992, None, 1.63, (None, None)),
+    ("kuka-kr6", "press"): Measured(0.00186, 0.00163, 1.14, None, (61, 61)),
     ("pincherx-100", "random"): Measured(0.205, 0.415, None, 0.00183, (None, None)),
     ("pincherx-100", "biased"): Measured(0.116, 0.237, 17.4, 0.703, (114, 117)),
-    ("pincherx-100", "scripted"): Measured(0.00204, 0.177, None, 0.0545, (None, None)),
-    ("pincherx-100", "press"): Measured(0.00329, 0.0231, 6.2, None, (18, 18)),
+    ("pincherx-100", "scripted"): Measured(0.00211, 0.177, None, 0.0524, (None, None)),
+    ("pincherx-100", "press"): Measured(0.00347, 0.0227, 4.72, None, (17, 17)),
     ("widowx-250s", "random"): Measured(0.0972, 0.105, None, 0.00109, (None, None)),
     ("widowx-250s", "biased"): Measured(0.0496, 0.0752, 6.12, 0.119, (63, 81)),
-    ("widowx-250s", "scripted"): Measured(0.000798, 0.067, None, 0.0381, (None, None)),
+    ("widowx-250s", "scripted"): Measured(0.000894, 0.067, None, 0.0381, (None, None)),
     ("widowx-250s", "press"): Measured(0.00117, 0.0159, 1.38, None, (32, 32)),
     ("lynxmotion-al5d", "random"): Measured(0.0132, 0.0346, None, 0.000391, (None, None)),
     ("lynxmotion-al5d", "biased"): Measured(0.00853, 0.0254, None, 0.00167, (None, None)),
-    ("lynxmotion-al5d", "scripted"): Measured(0.000595, 0.00187, None, 0.0106, (None, None)),
-    ("lynxmotion-al5d", "press"): Measured(0.000354, 0.00266, None, None, (None, None)),
+    ("lynxmotion-al5d", "scripted"): Measured(0.000543, 0.00216, None, 0.0198, (None, None)),
+    ("lynxmotion-al5d", "press"): Measured(0.000361, 0.00268, None, None, (None, None)),
     ("puma560", "random"): Measured(0.0153, 0.0114, None, 0.00157, (None, None)),
     ("puma560", "biased"): Measured(0.0328, 0.03, None, 0.00169, (None, None)),
     ("puma560", "scripted"): Measured(0.000249, 0.00572, None, 0.0146, (None, None)),
-    ("puma560", "press"): Measured(0.000571, 0.0027, 1.29, None, (105, 105)),
+    ("puma560", "press"): Measured(0.000571, 0.0027, 1.26, None, (105, 105)),
     ("ur5e", "random"): Measured(0.00896, 0.00604, 11.3, 0.357, (8, 0)),
     ("ur5e", "biased"): Measured(0.0, 0.0, 33.1, 1.65, (0, 0)),
-    ("ur5e", "scripted"): Measured(0.00173, 0.0144, None, 0.0386, (None, None)),
-    ("ur5e", "press"): Measured(0.0015, 0.000763, 1.32, None, (1, 1)),
+    ("ur5e", "scripted"): Measured(0.00322, 0.0144, None, 0.107, (None, None)),
+    ("ur5e", "press"): Measured(0.0015, 0.000763, 0.987, None, (1, 1)),
     ("stretch-re2", "random"): Measured(0.298, 0.147, None, 0.0166, (None, None)),
     ("stretch-re2", "biased"): Measured(0.0155, 0.00523, None, 0.00729, (None, None)),
     ("stretch-re2", "scripted"): Measured(0.000518, 0.00296, None, 0.0478, (None, None)),
     ("stretch-re2", "press"): Measured(0.000108, 0.000136, None, None, (None, None)),
     ("finger-edu", "random"): Measured(0.0047, 0.0133, 6.46, 0.205, (31, 25)),
     ("finger-edu", "biased"): Measured(0.00164, 0.00433, 30.1, 0.307, (8, 4)),
-    ("finger-edu", "scripted"): Measured(0.00163, 0.00438, None, 0.0298, (None, None)),
-    ("finger-edu", "press"): Measured(0.000706, 0.00448, 5.2, None, (11, 11)),
+    ("finger-edu", "scripted"): Measured(0.00096, 0.00346, None, 0.06, (None, None)),
+    ("finger-edu", "press"): Measured(0.000894, 0.00339, 9.06, None, (7, 7)),
     ("kuka-kr120", "random"): Measured(1.37, 0.285, 108.0, 1.24, (4, 4)),
     ("kuka-kr120", "biased"): Measured(2.39, 0.486, 344.0, 0.334, (3, 2)),
     ("kuka-kr120", "scripted"): Measured(0.000888, 0.00244, None, 0.0858, (None, None)),
     ("kuka-kr120", "press"): Measured(0.016, 0.00308, 1.06, None, (10, 10)),
     ("baxter-left", "random"): Measured(0.0175, 0.0126, 77.9, 0.46, (20, 21)),
     ("baxter-left", "biased"): Measured(0.0188, 0.0111, 50.9, 0.775, (22, 20)),
-    ("baxter-left", "scripted"): Measured(0.0017, 0.108, None, 0.0226, (None, None)),
-    ("baxter-left", "press"): Measured(0.00178, 0.0688, 6.28, None, (89, 89)),
+    ("baxter-left", "scripted"): Measured(0.00166, 0.109, None, 0.0175, (None, None)),
+    ("baxter-left", "press"): Measured(0.00178, 0.0688, 1.6, None, (89, 89)),
     ("tiago-arm", "random"): Measured(2.85, 1.53, 9.24, 0.23, (79, 64)),
     ("tiago-arm", "biased"): Measured(0.156, 0.462, None, 0.00718, (None, None)),
-    ("tiago-arm", "scripted"): Measured(0.0143, 0.624, None, 0.0943, (None, None)),
-    ("tiago-arm", "press"): Measured(0.167, 0.519, None, None, (None, None)),
+    ("tiago-arm", "scripted"): Measured(0.0146, 0.602, None, 0.178, (None, None)),
+    ("tiago-arm", "press"): Measured(0.039, 0.681, None, None, (None, None)),
 }
 #: Arms the default run covers (the rest of the corpus runs with -m slow).
 FAST_ARMS = ("ar6", "xarm6")
@@ -658,7 +663,8 @@ def test_the_ik_sequences_track_an_aim_moving_at_a_walking_pace(sequence, seed):
 
     Measured with this test's drive and numbers, seeds 0 and 1: the fastest step 0.9998 x
     AIM_SPEED; the reach ends 1.2e-6 m from the target; the press first touches at step 38 and
-    ends with the tool 14.99 mm above the ground (its wrist on it), 408 mm below its home."""
+    ends with the tool 16.55 mm above the ground (its wrist on it; 14.99 mm before the loop scaled
+    its steps as a whole), 415 mm below its home."""
     from armreach_core.diagnostics.parity import AIM_SPEED, drive
 
     env = ArmEnv("reach", backend="pybullet")
@@ -673,4 +679,22 @@ def test_the_ik_sequences_track_an_aim_moving_at_a_walking_pace(sequence, seed):
         assert np.linalg.norm(run.ee[-1] - target) < 3e-6
     else:
         assert run.first_contact == 38
-        assert run.ee[-1][2] == pytest.approx(0.01499, abs=0.0005)  # resting on the ground
+        assert run.ee[-1][2] == pytest.approx(0.01655, abs=0.0005)  # resting on the ground
+
+
+def test_the_ik_loop_aims_at_most_aim_lead_off_the_end_effector():
+    """A target out of reach is taken AIM_LEAD along the same line: the step is that target's."""
+    from armreach_core.diagnostics.parity import AIM_LEAD
+    from armreach_core.robot.bundled import asset_path
+    from armreach_core.robot.ik import IKPolicy
+    from armreach_core.robot.model import RobotModel
+
+    robot = RobotModel(str(asset_path("ar6", "ar6.urdf")))
+    here = robot.forward_kinematics(robot.home)
+    far = here + np.array([0.0, 0.0, -10.0])
+    led = IKPolicy(robot, 0.05, max_error=AIM_LEAD)
+    plain = IKPolicy(robot, 0.05)
+    np.testing.assert_array_equal(led.act(robot.home, far), plain.act(robot.home, here + [0.0, 0.0, -AIM_LEAD]))
+    assert not np.array_equal(led.act(robot.home, far), plain.act(robot.home, far))
+    near = here + [0.0, 0.0, -0.5 * AIM_LEAD]  # within the lead: unchanged
+    np.testing.assert_array_equal(led.act(robot.home, near), plain.act(robot.home, near))

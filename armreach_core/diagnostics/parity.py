@@ -43,6 +43,7 @@ from armreach_core.diagnostics.corpus import CorpusArm, for_each_corpus_arm
 from armreach_core.diagnostics.parity_gaps import JERK_SEQUENCES, PHASES, Gap, ParityReport, Tolerances
 from armreach_core.diagnostics.parity_report import corpus_row, markdown, save_report
 from armreach_core.diagnostics.parity_sequences import (
+    AIM_LEAD,
     AIM_SPEED,
     BIAS_MEAN,
     BIAS_STD,
@@ -155,6 +156,7 @@ def run_parity_corpus(
 
 
 __all__ = [
+    "AIM_LEAD",
     "AIM_SPEED",
     "BIAS_MEAN",
     "BIAS_STD",

@@ -8,7 +8,8 @@ leaves the end effector away from singularities and is holdable against gravity 
 URDF's effort limits (:func:`armreach_core.robot.statics.holdable`; skipped for an arm that holds
 none of the candidates). The URDF's zero pose (moved inside
 the limits) comes first, so it is kept whenever it qualifies; then poses at growing
-distances from it. Nothing here is tuned to an arm: geometry, limits and kinematics come
+distances from it; where none of those is holdable, poses from anywhere in the limits that are,
+nearest to the zero pose first. Nothing here is tuned to an arm: geometry, limits and kinematics come
 from the URDF, and the thresholds are relative to the arm's own size and Jacobian.
 """
 
@@ -84,17 +85,30 @@ def default_home(robot: ArmKinematics) -> FloatArray:
     candidates = [zero[None, :]] + [robot.clip(zero + radius * directions * span) for radius in RADII]
     batch = np.vstack(candidates)
     typical = float(np.percentile(_dexterity(robot, robot.sample_configurations(rng, 256)), 75))
+    # Candidates come in rings: the zero pose, then DIRECTIONS per radius. The first ring with
+    # a qualifying pose wins; within it the most dexterous pose without self-collision.
+    rings = [range(0, 1)] + [range(1 + i * DIRECTIONS, 1 + (i + 1) * DIRECTIONS) for i in range(len(RADII))]
+    held = holdable(robot, batch)
+    anywhere = range(0)
+    if not held.any():
+        # No ring holds against gravity: PR2's shoulder lifts its arm only hanging, past any
+        # ring's reach (its URDF leaves out the springs that hold the rest). A last ring of poses
+        # from anywhere in the limits that the motors hold, nearest to the zero pose first.
+        extra = robot.sample_configurations(rng, DIRECTIONS * len(RADII))
+        extra[:, robot.arm_dof :] = zero[robot.arm_dof :]
+        extra = extra[holdable(robot, extra)]
+        extra = extra[np.argsort(np.linalg.norm((extra - zero) / np.maximum(span, 1e-9), axis=1), kind="stable")]
+        anywhere = range(len(batch), len(batch) + len(extra))
+        rings.append(anywhere)
+        batch = np.vstack([batch, extra])
+        held = holdable(robot, batch)
     lowest = lowest_points(robot, batch)
     dexterity = _dexterity(robot, batch)
     fine = (lowest >= GROUND_CLEARANCE) & (dexterity >= MIN_DEXTERITY * typical)
-    held = holdable(robot, batch)
     weak = "" if held.all() else " among the poses its motors hold against gravity"
     if held.any():  # else an arm too weak for its own weight: ignore gravity rather than fail
         fine &= held
         lowest = np.where(held, lowest, -np.inf)
-    # Candidates come in rings: the zero pose, then DIRECTIONS per radius. The first ring with
-    # a qualifying pose wins; within it the most dexterous pose without self-collision.
-    rings = [range(0, 1)] + [range(1 + i * DIRECTIONS, 1 + (i + 1) * DIRECTIONS) for i in range(len(RADII))]
     # Links apart by their boxes leave room between them; where every qualifying pose has two
     # links' boxes overlapping (an arm hanging beside a torso), their collision hulls decide.
     blocked: list[tuple[str, str]] = []  # the overlapping pairs of every qualifying pose, for the error
@@ -102,7 +116,7 @@ def default_home(robot: ArmKinematics) -> FloatArray:
         blocked.clear()
         for ring in rings:
             ok = [i for i in ring if fine[i]]
-            for i in sorted(ok, key=lambda k: -dexterity[k]):
+            for i in ok if ring is anywhere else sorted(ok, key=lambda k: -dexterity[k]):
                 hits = self_collisions(robot, batch[i], hulls=hulls)
                 blocked += hits
                 if not hits:

@@ -139,6 +139,15 @@ class IKPolicy:
     the control period where that is less), default ``max_joint_step`` for every joint.
     The planned move keeps every joint within its ``joint_step``, so all joints still
     arrive together.
+
+    Two options make the damped-least-squares step a steadier tracker of an aim the arm may
+    not get to (below the full TALOS's raised arm, past a joint limit), where each step would
+    otherwise be a large one against the limits and the loop chatter there:
+    ``max_error`` (m) caps how far off the end effector the step aims (a target farther away is
+    taken at that distance along the same line; Buss and Kim, "Selectively damped least
+    squares", 2005, clamp the error the same way); ``keep_direction`` brings each joint's target
+    within its limits and then scales the whole step down until every joint is within its
+    ``joint_step``, instead of clipping each joint on its own, which turns the step off its line.
     """
 
     def __init__(
@@ -151,6 +160,8 @@ class IKPolicy:
         restarts: int = 0,
         near: float = 0.02,
         joint_step: npt.ArrayLike | None = None,
+        max_error: float | None = None,
+        keep_direction: bool = False,
     ) -> None:
         self.robot = robot
         self.max_joint_step = max_joint_step
@@ -163,10 +174,12 @@ class IKPolicy:
         self.gain = gain
         self.restarts = restarts
         self.near = near
+        self.max_error = max_error
+        self.keep_direction = keep_direction
         self._target: FloatArray | None = None
         self._goal: FloatArray | None = None
-        # An arm whose motors do not hold its home against gravity (PR2's, built to lean on springs
-        # the URDF leaves out) got its home with gravity ignored, and its plans are taken so too.
+        # An arm whose motors do not hold its home against gravity (one too weak for its weight in
+        # every pose tried, or a home given so) has its plans taken with gravity ignored too.
         self._weak = not bool(holdable(robot, robot.home))
 
     @classmethod
@@ -202,7 +215,16 @@ class IKPolicy:
                 dq = self._goal - q_arr
                 scale = max(1.0, float(np.max(np.abs(dq) / self.joint_step)))
                 return self._inside(q_arr, dq / (scale * self.max_joint_step))
+        if self.max_error is not None:
+            here = self.robot.forward_kinematics(q_arr)
+            error = float(np.linalg.norm(goal - here))
+            if error > self.max_error:
+                goal = here + (goal - here) * (self.max_error / error)
         dq = self.gain * dls_step(self.robot, q_arr, goal, self.damping)
+        if self.keep_direction:
+            low, high = target_bounds(self.robot)
+            dq = np.clip(q_arr + dq, low, high) - q_arr
+            dq /= max(1.0, float(np.max(np.abs(dq) / self.joint_step)))
         return self._inside(q_arr, dq / self.max_joint_step)
 
     def _inside(self, q: FloatArray, action: FloatArray) -> npt.NDArray[np.float32]:
