@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+import operator
 import os
 import sys
 from typing import Any
@@ -31,6 +32,20 @@ def checked_action(action: Any, shape: tuple[int, ...], meaning: str) -> npt.NDA
     elif not np.isfinite(arr).all():
         raise ActionError(f"action contains NaN or inf: {values}; the env's state is unchanged")
     return np.minimum(np.maximum(arr, -1.0, out=arr), 1.0, out=arr)
+
+
+def within_limits(
+    target: npt.NDArray[np.float64],
+    lower: npt.NDArray[np.float64],
+    upper: npt.NDArray[np.float64],
+    bounds: tuple[list[float], list[float]],
+) -> tuple[npt.NDArray[np.float64], bool]:
+    """``target`` clipped into ``[lower, upper]``, and whether any value lay outside; ``bounds`` are
+    the limits as lists, compared in Python (for a few joints cheaper than four numpy calls)."""
+    values = target.tolist()
+    if all(map(operator.le, bounds[0], values)) and all(map(operator.le, values, bounds[1])):
+        return target, False
+    return np.minimum(np.maximum(target, lower), upper), True
 
 
 def _converted(action: Any, shape: tuple[int, ...], meaning: str) -> npt.NDArray[np.float64]:

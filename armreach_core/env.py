@@ -17,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.actions import checked_action, require_display
+from armreach_core.actions import checked_action, require_display, within_limits
 from armreach_core.backend import ArmState, Backend, Camera, PhysicsConfig
 from armreach_core.engine_errors import engine_failure
 from armreach_core.errors import ArmReachError, ConfigError
@@ -201,11 +201,11 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         self.task.joint_step = self.joint_step
         # whether the task ends episodes for reasons of its own (reach never does: no call per step)
         self._task_ends = type(self.task).ended is not Task.ended
-        # The cap each step applies: none where the task's own mapping never moves a joint past it
-        # (the default one moves each by at most max_joint_step), as on the bundled arm.
-        cap = self.velocity_step
-        default_mapping = type(self.task).joint_targets is Task.joint_targets
-        self._velocity_cap = None if cap is None or (default_mapping and (cap >= self.max_joint_step).all()) else cap
+        # The cap each step applies: none where the default mapping (by max_joint_step at most) stays under it.
+        cap, self._default_mapping = self.velocity_step, self.task.moves_joints_by_action()
+        unreachable = cap is None or (self._default_mapping and bool((cap >= self.max_joint_step).all()))
+        self._velocity_cap = None if unreachable else cap
+        self._limits = (self.robot.lower.tolist(), self.robot.upper.tolist())
 
         self._action_shape = (self.task.action_size(),)
         self._action_meaning = self.task.action_meaning()  # for the error a wrong shape gets
@@ -266,7 +266,8 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         """The task's joint targets for ``action`` (in [-1, 1]) from angles ``q``, each within
         :attr:`velocity_step`, before the joint limits: :meth:`step` clips them into the limits
         (or ends the episode there); a real arm's loop does the same through its safety layer."""
-        target = self.task.joint_targets(action, q, self.max_joint_step)
+        step = self.max_joint_step  # the default mapping's arithmetic (Task.joint_targets), without its calls
+        target = q + action * step if self._default_mapping else self.task.joint_targets(action, q, step)
         cap = self._velocity_cap
         if cap is None:
             return target
@@ -308,9 +309,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             raise ArmReachError("call reset() before step()")
         backend = self.backend
         target = self.joint_targets(self._check_action(action), self._state.q)
-        clipped = np.minimum(np.maximum(target, self.robot.lower), self.robot.upper)
-        excess = target - clipped
-        violated = bool(excess.dot(excess) > 0.0)  # one call instead of two comparisons and reductions
+        clipped, violated = within_limits(target, self.robot.lower, self.robot.upper, self._limits)
         if self._pending:  # a profile's latency: the target sent now was chosen that many steps ago
             self._pending.append(clipped)
             clipped = self._pending.popleft()

@@ -212,6 +212,11 @@ class Task(ABC):
         """
         return q + action * max_joint_step
 
+    def moves_joints_by_action(self) -> bool:
+        """Whether :meth:`joint_targets` is the default mapping, ``q + action * max_joint_step``
+        (then the env computes it itself, and skips a velocity cap it cannot reach)."""
+        return type(self).joint_targets is Task.joint_targets
+
     def setup_scene(self, scene: Scene) -> None:  # noqa: B027 - optional callback
         """Add markers or objects to the world (called once)."""
 

@@ -417,3 +417,31 @@ def test_a_physics_blow_up_ends_the_episode_and_says_so(backend, steps_before):
     assert not terminated and "physics_unstable" not in info
     assert np.all(np.isfinite(obs))
     env.close()
+
+
+def test_the_envs_own_joint_targets_are_the_tasks_mapping_bit_for_bit(env):
+    """The env computes the default mapping itself (no call into the task per step): the same
+    targets as the task's own ``joint_targets``, and the joint-limit check flags a target a hair
+    past a limit and clips it there, and passes one on the limit unchanged."""
+    from armreach_core.actions import within_limits
+
+    robot, task = env.robot, env.task
+    assert task.moves_joints_by_action()
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        q = robot.sample_configurations(rng, 1)[0]
+        action = rng.uniform(-1.0, 1.0, robot.dof)
+        np.testing.assert_array_equal(env.joint_targets(action, q), task.joint_targets(action, q, env.max_joint_step))
+    bounds = (robot.lower.tolist(), robot.upper.tolist())
+    on_limit = robot.upper.copy()
+    clipped, violated = within_limits(on_limit, robot.lower, robot.upper, bounds)
+    assert not violated and clipped is on_limit
+    past = on_limit.copy()
+    past[2] = np.nextafter(past[2], np.inf)
+    clipped, violated = within_limits(past, robot.lower, robot.upper, bounds)
+    assert violated and np.array_equal(clipped, robot.upper)
+    ee = ArmReach6DOFEnv(backend=env.backend_name, control="ee")
+    try:
+        assert not ee.task.moves_joints_by_action()
+    finally:
+        ee.close()

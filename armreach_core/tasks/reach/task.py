@@ -186,6 +186,9 @@ class ReachTask(Task):
         """With ``control="ee"``, the displacement (m) of an action of 1 along an axis."""
         return self.ee_step if self.ee_step is not None else max_joint_step * self.sampler.map.reach
 
+    def moves_joints_by_action(self) -> bool:
+        return self.control == "joints" and type(self).joint_targets is ReachTask.joint_targets
+
     def joint_targets(self, action: FloatArray, q: FloatArray, max_joint_step: float) -> FloatArray:
         if self.control == "joints":
             return super().joint_targets(action, q, max_joint_step)
