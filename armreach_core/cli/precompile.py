@@ -72,7 +72,7 @@ def _first_calls() -> None:
         return
     parameter = torch.nn.Parameter(torch.zeros(1))
     optimizer = torch.optim.Adam([parameter])
-    parameter.sum().backward()
+    parameter.grad = torch.ones(1)
     optimizer.step()
     torch.save(optimizer.state_dict(), io.BytesIO())  # a checkpoint: torch.utils.serialization
 
