@@ -147,7 +147,7 @@ def _deterministic(env: ArmEnv, seed: int) -> bool:
     return all(np.array_equal(a, b) for a, b in zip(first, run(), strict=True))
 
 
-def _ik(env: ArmEnv, episodes: int, seed: int) -> tuple[float, float]:
+def ik_success(env: ArmEnv, episodes: int, seed: int) -> tuple[float, float]:
     """Success rate and mean steps of the planned IK reference on ``episodes`` seeded targets."""
     successes, steps = 0, []
     for i in range(episodes):
@@ -245,7 +245,7 @@ def _engine(backend: str, env_kwargs: Mapping[str, Any], steps: int, ik_episodes
         facts.steps_per_s = _steps_per_s(env, steps, seed)
         facts.deterministic = _deterministic(env, seed)
         if ik_episodes:
-            facts.ik_success, facts.ik_steps = _ik(env, ik_episodes, 10_000 + seed)
+            facts.ik_success, facts.ik_steps = ik_success(env, ik_episodes, 10_000 + seed)
     finally:
         env.close()
     return facts
