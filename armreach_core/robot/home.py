@@ -101,7 +101,7 @@ def default_home(robot: ArmKinematics) -> FloatArray:
         anywhere = range(len(batch), len(batch) + len(extra))
         rings.append(anywhere)
         batch = np.vstack([batch, extra])
-        held = holdable(robot, batch)
+        held = np.concatenate([held, np.ones(len(extra), dtype=bool)])  # every extra pose was kept for it
     lowest = lowest_points(robot, batch)
     dexterity = _dexterity(robot, batch)
     fine = (lowest >= GROUND_CLEARANCE) & (dexterity >= MIN_DEXTERITY * typical)
