@@ -108,3 +108,68 @@ def test_collection_on_two_workers_gives_the_serial_data_in_seed_order() -> None
     again, other = _collect(1, policy, seeds), _collect(1, policy, range(905, 910))
     np.testing.assert_array_equal(np.stack(serial.observations), np.stack(again.observations))
     assert not np.array_equal(np.stack(serial.observations)[:5], np.stack(other.observations)[:5])
+
+
+JUDGED = """
+description: the IK reference cloned, judged on held-out targets after every fit
+reach:
+  sac:
+    timesteps: 96
+    learner: sb3
+    learning_starts: 32
+    env: {max_episode_steps: 60}
+    policy: {net_arch: [64, 64]}
+    batch_size: 64
+    imitation: {episodes: 8, rounds: 4, rollouts: 3, gradient_steps: GRADIENT_STEPS, beta: 0.5}
+    until_success: {threshold: THRESHOLD, episodes: 5, background: false}
+"""
+
+
+def _judged_run(tmp_path: Path, gradient_steps: int, threshold: float) -> tuple[Path, list[dict[str, float]]]:
+    from armreach_core.rl.validation import read_validations
+
+    preset = tmp_path / "judged.yaml"
+    preset.write_text(JUDGED.replace("GRADIENT_STEPS", str(gradient_steps)).replace("THRESHOLD", str(threshold)))
+    run_dir = tmp_path / "run"
+    assert main(["train", "--preset", str(preset), "--out", str(run_dir)]) == 0
+    return run_dir, read_validations(run_dir)
+
+
+def test_imitation_that_passes_a_held_out_evaluation_ends_the_run_there(tmp_path: Path) -> None:
+    pytest.importorskip("stable_baselines3")
+    from armreach_core.rl.validation import stopped_early
+
+    run_dir, rows = _judged_run(tmp_path, 400, 0.6)
+    stages = json.loads((run_dir / runs.IMITATION).read_text())["stages"]
+    judged = [stage["held_out"]["passed"] for stage in stages]
+    # every fit judged up to the first that passed (measured: the second DAgger round, 3 of 5),
+    # the rounds left and the reinforcement learning not run
+    assert judged[-1] is True and not any(judged[:-1]) and len(stages) < 5
+    assert len(rows) == len(stages) and [row["passed"] for row in rows] == [float(p) for p in judged]
+    assert rows[-1]["successes"] >= 3 and {row["timesteps"] for row in rows} == {0}
+    assert stopped_early(run_dir)
+    assert json.loads((run_dir / runs.PROGRESS).read_text())["timesteps"] == 0
+
+
+def test_imitation_that_fails_its_evaluations_runs_every_round_then_reinforcement(tmp_path: Path) -> None:
+    pytest.importorskip("stable_baselines3")
+    run_dir, rows = _judged_run(tmp_path, 1, 1.0)  # one gradient step a fit: an actor that misses
+    record = json.loads((run_dir / runs.IMITATION).read_text())
+    assert [stage["held_out"]["passed"] for stage in record["stages"]] == [False] * 5
+    # a row per fit, then reinforcement learning to its 96 steps
+    assert [row["timesteps"] for row in rows[:5]] == [0] * 5 and not any(row["passed"] for row in rows)
+    assert json.loads((run_dir / runs.PROGRESS).read_text())["timesteps"] == 96
+
+
+def test_imitation_episodes_end_at_their_own_step_limit(tmp_path: Path) -> None:
+    pytest.importorskip("stable_baselines3")
+    preset = tmp_path / "short.yaml"
+    preset.write_text(
+        CLONE.replace("beta: 0.5}", "beta: 0.5, episode_steps: 4}").replace("gradient_steps: 400", "gradient_steps: 5")
+    )
+    run_dir = tmp_path / "run"
+    assert main(["train", "--preset", str(preset), "--out", str(run_dir)]) == 0
+    first, dagger = json.loads((run_dir / runs.IMITATION).read_text())["stages"]
+    # the reference takes about 12 steps to a target (98 states in these 8 episodes without the key):
+    # each episode ends at 4 steps at the latest (measured: 31 states, one target reached in 3)
+    assert 8 * 3 <= first["states"] <= 8 * 4 and dagger["states"] <= 3 * 4 and first["success_rate"] < 0.5

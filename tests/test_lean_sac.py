@@ -142,12 +142,12 @@ def test_overlap_is_refused_where_it_cannot_act() -> None:
 
 
 @pytest.mark.parametrize("algo", ["sac", "td3"])
-def test_the_any_arm_preset_acts_while_it_learns(algo: str, tmp_path: Any) -> None:
+def test_the_any_arm_rl_preset_acts_while_it_learns(algo: str, tmp_path: Any) -> None:
     from armreach_core.rl.agents import build_model
     from armreach_core.rl.agents import make_vec_env as make_run_env
     from armreach_core.rl.config import resolve_config
 
-    config = resolve_config(algo=algo, preset="any-arm", backend="pybullet")
+    config = resolve_config(algo=algo, preset="any-arm-rl", backend="pybullet")
     assert config.settings["overlap"] is True
     env = make_run_env(config, tmp_path, 0, 1, append=False)
     try:

@@ -87,6 +87,14 @@ def test_a_batch_s_jacobian_is_each_pose_s_with_numpy_s_cross_products_to_the_bi
     assert np.array_equal(cross(a[0, 0], b[:, 1]), np.cross(a[0, 0], b[:, 1]))
 
 
+def test_position_and_jacobian_come_from_one_walk_to_the_bit(ar6_urdf):
+    """An IK iteration takes both from one walk of the chain: the same numbers as the two calls."""
+    robot = RobotModel(ar6_urdf)
+    for q in (robot.sample_configurations(np.random.default_rng(4), 3), robot.home):
+        position, jac = robot.position_and_jacobian(q)
+        assert np.array_equal(position, robot.forward_kinematics(q)) and np.array_equal(jac, robot.jacobian(q))
+
+
 def test_ee_link_choice_changes_fk(ar6_urdf):
     tool = RobotModel(ar6_urdf)
     wrist = RobotModel(ar6_urdf, ee_link="wrist_3_link")

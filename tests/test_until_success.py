@@ -139,7 +139,7 @@ def test_a_bad_until_success_section_is_refused_naming_the_key(section: dict[str
         validate_settings("ppo", {"until_success": section}, "fast.reach.ppo")
 
 
-@pytest.mark.parametrize("name", ["fast", "any-arm"])
+@pytest.mark.parametrize("name", ["fast", "any-arm", "any-arm-rl"])
 def test_the_fast_and_any_arm_presets_stop_at_98_percent_on_100_held_out_targets(name: str) -> None:
     from armreach_core.rl.presets import load_preset
 

@@ -22,6 +22,15 @@ its seed, so the data are the same for any ``W``.
 Each fit takes ``G`` Adam steps of ``batch_size`` samples, the run's learning rate. The run's
 ``timesteps`` of reinforcement learning follow from the cloned actor (0: none). The env
 steps of imitation are reported apart from the run's own (``imitation.json``).
+
+``episode_steps: S`` ends imitation's episodes after ``S`` steps instead of the training env's
+``max_episode_steps``: a large arm's reference may need more steps to a far target than a
+training episode holds, and a demonstration cut short never shows the end of its path.
+
+With the run's ``until_success`` (:mod:`armreach_core.rl.validation`), the actor is evaluated
+on held-out targets after every fit, a row of ``validation.csv`` each; at the first that
+passes, the rounds left and the reinforcement learning are skipped, as an evaluation during
+reinforcement learning would have stopped it.
 Implemented for the SB3 learner, whose actors are PyTorch modules.
 """
 
@@ -35,6 +44,7 @@ import numpy as np
 
 from armreach_core.rl.collection import Collector, Dataset, Rollout, episode
 from armreach_core.rl.demonstrations import DEMO_SEED, reference_controller
+from armreach_core.rl.validation import Validation
 
 #: Seeds of the learner's rollouts start here, past any demonstration episode's.
 ROLLOUT_SEED = DEMO_SEED + 500_000
@@ -77,10 +87,13 @@ def imitate(
     seed: int,
     log: Callable[[str], None] | None = None,
     env_kwargs: Mapping[str, Any] | None = None,
+    judge: Callable[[], Validation] | None = None,
 ) -> dict[str, Any]:
     """Teach ``model``'s actor ``env``'s reference controller (see the module docstring); what each stage did.
 
-    ``env_kwargs`` build the envs of the worker processes (``workers`` above 1).
+    ``env_kwargs`` build the envs of the worker processes (``workers`` above 1). ``judge``
+    evaluates the actor on held-out targets after each stage's fit (the run's ``until_success``);
+    once one passes, the stages left are not run.
     """
     demonstrator = reference_controller(env, "imitation")
     episodes, rounds = int(spec.get("episodes", 100)), int(spec.get("rounds", 4))
@@ -120,11 +133,22 @@ def imitate(
                 "loss": loss,
                 "seconds": time.perf_counter() - t0,
             }
+            held = judge() if judge is not None else None
+            if held is not None:
+                record["held_out"] = {
+                    "episodes": held.episodes,
+                    "successes": held.successes,
+                    "passed": held.passed,
+                    "seconds": held.seconds,
+                }
             stages.append(record)
             if log is not None:
+                judged = "" if held is None else f", held-out {held.successes}/{held.episodes}"
                 log(
                     f"imitation {record['stage']}: {count} episodes (expert share {share:.2f}), "
                     f"success {record['success_rate']:.0%}, touching {record['touch_rate']:.0%}, "
-                    f"{len(data)} states, loss {loss:.4f}, {record['seconds']:.0f} s"
+                    f"{len(data)} states, loss {loss:.4f}{judged}, {record['seconds']:.0f} s"
                 )
+            if held is not None and held.passed:
+                break
     return {"stages": stages, "env_steps": len(data), "workers": workers}

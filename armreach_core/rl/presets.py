@@ -203,6 +203,7 @@ IMITATION_SCHEMA: dict[str, Check] = {
     "beta": _num(float, 0.0, 1.0),
     "noise": _num(float, 0.0),
     "workers": _num(int, 1),
+    "episode_steps": _num(int, 1),
 }
 HER_SCHEMA: dict[str, Check] = {
     "n_sampled_goal": _num(int, 1),

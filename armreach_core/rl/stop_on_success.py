@@ -24,7 +24,6 @@ there.
 
 from __future__ import annotations
 
-import csv
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -32,7 +31,15 @@ from typing import Any
 from stable_baselines3.common.callbacks import BaseCallback
 
 from armreach_core.rl.background import BackgroundValidator, copyable, for_worker, restore, snapshot
-from armreach_core.rl.validation import BATCH, COLUMNS, VALIDATION, UntilSuccess, Validation, evaluation_envs, validate
+from armreach_core.rl.validation import (
+    BATCH,
+    VALIDATION,
+    UntilSuccess,
+    Validation,
+    evaluation_envs,
+    record,
+    validate,
+)
 
 #: Evaluations asked of the worker before training waits for the oldest answer.
 MAX_PENDING = 2
@@ -189,22 +196,7 @@ class StopOnSuccessCallback(BaseCallback):
         return bool(sum(buffer) / len(buffer) >= self.spec.threshold - self.spec.gate)
 
     def _record(self, steps: int, result: Validation) -> None:
-        new = not self.path.is_file()
-        with open(self.path, "a", newline="", encoding="utf-8") as handle:
-            writer = csv.writer(handle)
-            if new:
-                writer.writerow(COLUMNS)
-            writer.writerow(
-                [
-                    steps,
-                    f"{self.train_seconds():.3f}",
-                    result.episodes,
-                    result.successes,
-                    f"{result.success_rate:.4f}",
-                    int(result.passed),
-                    f"{result.seconds:.3f}",
-                ]
-            )
+        record(self.path, steps, self.train_seconds(), result)
 
     def _on_training_end(self) -> None:
         for env in self.envs:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
@@ -25,7 +25,15 @@ from armreach_core.rl.learners import algo_class, configure_xla
 from armreach_core.rl.presets import RL_ALGOS
 from armreach_core.rl.stop_on_success import StopOnSuccessCallback
 from armreach_core.rl.timing import RolloutTimer, TimedVecEnv, split, write_timing
-from armreach_core.rl.validation import UntilSuccess, Validation
+from armreach_core.rl.validation import (
+    BATCH,
+    VALIDATION,
+    UntilSuccess,
+    Validation,
+    evaluation_envs,
+    record,
+    validate,
+)
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
@@ -118,24 +126,47 @@ def _demonstrate(config: RunConfig, model: Any, run_dir: Path) -> None:
     runs.write_json(run_dir / runs.DEMONSTRATIONS, {"episodes": episodes, "steps": steps, "success_rate": success})
 
 
-def _imitate(config: RunConfig, model: Any, run_dir: Path, stream: TextIO | None) -> None:
-    """Teach the actor the task's reference controller first (preset key ``imitation``) and record how it went."""
+def _imitate(
+    config: RunConfig, model: Any, run_dir: Path, stream: TextIO | None, train_seconds: Callable[[], float]
+) -> Validation | None:
+    """Teach the actor the task's reference controller first (preset key ``imitation``) and record how
+    it went; the held-out evaluation that passed after a fit (preset ``until_success``), if one did."""
     from armreach_core.env import ArmEnv
     from armreach_core.rl.agents import env_kwargs
     from armreach_core.rl.imitation import imitate
 
+    spec = config.settings["imitation"]
     kwargs = env_kwargs(config)
+    if "episode_steps" in spec:
+        kwargs["max_episode_steps"] = int(spec["episode_steps"])
     env = ArmEnv(**kwargs)
+    until = UntilSuccess.from_settings(config.settings)
+    judges: list[Any] = []
+    passed: list[Validation] = []
 
     def log(line: str) -> None:
         if stream is not None:
             print(line, file=stream, flush=True)
 
+    def judge() -> Validation:
+        assert until is not None
+        if not judges:
+            evaluation = env_kwargs(config, evaluation=True)
+            judges.extend(ArmEnv(**evaluation) for _ in range(evaluation_envs(until)))
+        result = validate(lambda obs: model.predict(obs, deterministic=True)[0], judges, until, lanes=BATCH)
+        record(run_dir / VALIDATION, int(model.num_timesteps), train_seconds(), result)
+        if result.passed:
+            passed.append(result)
+        return result
+
     try:
-        record = imitate(model, env.unwrapped, config.settings["imitation"], config.seed, log, kwargs)
+        outcome = imitate(model, env.unwrapped, spec, config.seed, log, kwargs, judge if until is not None else None)
     finally:
         env.close()
-    runs.write_json(run_dir / runs.IMITATION, record)
+        for judged in judges:
+            judged.close()
+    runs.write_json(run_dir / runs.IMITATION, outcome)
+    return passed[0] if passed else None
 
 
 def _check_reference(config: RunConfig) -> None:
@@ -211,6 +242,12 @@ def train(
     rollouts = RolloutTimer()
     until: StopOnSuccessCallback | None = None
     t0 = time.perf_counter()  # training time includes demonstrations and imitation
+    imitated: Validation | None = None  # a held-out evaluation passed during imitation
+    base_seconds = 0.0  # a resumed run's earlier training time, read from its checkpoint below
+
+    def train_seconds() -> float:
+        return base_seconds + time.perf_counter() - t0
+
     try:
         if resume:
             model = _load_checkpoint(config, run_dir, env, trust)
@@ -220,18 +257,16 @@ def train(
             if "demonstrations" in config.settings:
                 _demonstrate(config, model, run_dir)
             if "imitation" in config.settings:
-                _imitate(config, model, run_dir, stream)
+                imitated = _imitate(config, model, run_dir, stream, train_seconds)
         # Written once the model exists, so that a folder with a config always has something to resume
         # or is safe to start over (see runs.new_run_dir).
         runs.write_config(run_dir, config)
         runs.record_command(run_dir, command or ["python:", "armreach_core.rl.train.train", str(run_dir)])
         runs.write_json(run_dir / runs.ENVIRONMENT, runs.environment_record())
         base_seconds = float(read_progress(run_dir).get("train_seconds", 0.0)) if resume else 0.0
-        remaining = config.timesteps - int(model.num_timesteps)
+        # an actor that passed its held-out evaluation in imitation needs no reinforcement learning
+        remaining = 0 if imitated is not None else config.timesteps - int(model.num_timesteps)
         signals = StopSignals()
-
-        def train_seconds() -> float:
-            return base_seconds + time.perf_counter() - t0
 
         with signals.installed():
             rows: dict[str, int] | None = None
@@ -273,7 +308,7 @@ def train(
                     kept = until.keep_best() if until is not None else None
                     runs.atomic_save(run_dir / runs.MODEL, model.save)
         seconds = time.perf_counter() - t0
-        passed = until.passed if until is not None else None
+        passed = imitated if imitated is not None else until.passed if until is not None else None
         validation = until.seconds if until is not None else 0.0
         parts = split(time.perf_counter() - call_start, env.seconds, rollouts.rollouts, rollouts.between, validation)
         write_timing(run_dir, parts, trained)

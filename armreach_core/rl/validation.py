@@ -186,6 +186,27 @@ def evaluation_envs(spec: UntilSuccess) -> int:
     return lanes + min(spec.allowed_failures + 1, spec.episodes - lanes)
 
 
+def record(path: Path, steps: int, train_seconds: float, result: Validation) -> None:
+    """Append ``result``, the evaluation of the policy at ``steps`` env steps, as a row of ``path``
+    (a run's ``validation.csv``; the header first when the file is new)."""
+    new = not path.is_file()
+    with open(path, "a", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle)
+        if new:
+            writer.writerow(COLUMNS)
+        writer.writerow(
+            [
+                steps,
+                f"{train_seconds:.3f}",
+                result.episodes,
+                result.successes,
+                f"{result.success_rate:.4f}",
+                int(result.passed),
+                f"{result.seconds:.3f}",
+            ]
+        )
+
+
 def _stack(observations: list[Any]) -> Any:
     """A batch of observations: stacked arrays, or a dict of stacked arrays (goal-conditioned envs)."""
     if isinstance(observations[0], dict):

@@ -15,9 +15,12 @@ from armreach_core.robot.statics import holdable
 
 def dls_step(robot: RobotModel, q: npt.ArrayLike, target: npt.ArrayLike, damping: float = 0.05) -> FloatArray:
     """Joint change that moves the end effector towards ``target`` (one DLS iteration)."""
-    q_arr = np.asarray(q, dtype=np.float64)
-    error = np.asarray(target, dtype=np.float64) - robot.forward_kinematics(q_arr)
-    jac = robot.jacobian(q_arr)
+    position, jac = robot.position_and_jacobian(np.asarray(q, dtype=np.float64))
+    return _dls(jac, np.asarray(target, dtype=np.float64) - position, damping)
+
+
+def _dls(jac: FloatArray, error: FloatArray, damping: float) -> FloatArray:
+    """The damped-least-squares joint change for Jacobian ``jac`` and position error ``error``."""
     jjt = jac @ jac.T + (damping**2) * np.eye(3)
     return jac.T @ np.linalg.solve(jjt, error)
 
@@ -29,21 +32,31 @@ def solve(
     iterations: int = 300,
     tolerance: float = 1e-4,
     max_step: float = 0.2,
+    bounds: tuple[FloatArray, FloatArray] | None = None,
 ) -> tuple[FloatArray, float]:
-    """Joint angles whose end effector is near ``target``; returns (q, remaining distance in m)."""
+    """Joint angles whose end effector is near ``target``; returns (q, remaining distance in m).
+
+    ``bounds`` (lowest, highest) keep the solution inside them instead of the joint limits.
+    """
     q = robot.home.copy() if q0 is None else np.asarray(q0, dtype=np.float64).copy()
     goal = np.asarray(target, dtype=np.float64)
+    low, high = (robot.lower, robot.upper) if bounds is None else bounds
+    position, jac = robot.position_and_jacobian(q)  # one walk of the chain an iteration
     for _ in range(iterations):
-        dq = dls_step(robot, q, goal)
+        dq = _dls(jac, goal - position, 0.05)
         norm = float(np.max(np.abs(dq)))
         if norm > max_step:
             dq *= max_step / norm
-        q = robot.clip(q + dq)
-        if float(np.linalg.norm(goal - robot.forward_kinematics(q))) < tolerance:
+        q = np.clip(q + dq, low, high)
+        position, jac = robot.position_and_jacobian(q)
+        if float(np.linalg.norm(goal - position)) < tolerance:
             break
-    return q, float(np.linalg.norm(goal - robot.forward_kinematics(q)))
+    return q, float(np.linalg.norm(goal - position))
 
 
+#: How near (m) a solution inside the shrunk limits of ``IKPolicy(limit_margin=...)`` must bring the
+#: end effector to its goal to be taken (:func:`solve`'s tolerance).
+SOLVED = 1e-4
 #: Random restarts of the IK reference's solve (``IKPolicy(restarts=RESTARTS)``): what every
 #: caller that wants the reference's behaviour passes.
 RESTARTS = 16
@@ -63,6 +76,7 @@ def solve_with_restarts(
     seed: int = 0,
     accept: Callable[[FloatArray], bool] | None = None,
     near: float = 0.0,
+    bounds: tuple[FloatArray, FloatArray] | None = None,
 ) -> tuple[FloatArray, float]:
     """:func:`solve` from ``q0``, then from home, then from ``restarts`` random configurations.
 
@@ -72,7 +86,7 @@ def solve_with_restarts(
     ``tolerance``, else the best one found. When solutions were found but ``accept`` took
     none, the search goes on for up to :data:`PERSISTENCE` times ``restarts`` further random
     starts, stopping at the first one it takes. The random starts are seeded: the result is
-    deterministic.
+    deterministic. ``bounds`` go to :func:`solve`.
     """
     rng = np.random.default_rng(seed)
     starts = [np.asarray(q0, dtype=np.float64), robot.home]
@@ -87,7 +101,7 @@ def solve_with_restarts(
         start = starts[i] if i < len(starts) else robot.sample_configurations(rng, 1)[0]
         if i >= len(starts):
             start[robot.arm_dof :] = robot.home[robot.arm_dof :]  # off-arm joints keep their home
-        q, distance = solve(robot, target, q0=start, tolerance=tolerance)
+        q, distance = solve(robot, target, q0=start, tolerance=tolerance, bounds=bounds)
         if distance < tolerance:
             if accept is None or accept(q):
                 return q, distance
@@ -162,6 +176,7 @@ class IKPolicy:
         joint_step: npt.ArrayLike | None = None,
         max_error: float | None = None,
         keep_direction: bool = False,
+        limit_margin: float = 0.0,
     ) -> None:
         self.robot = robot
         self.max_joint_step = max_joint_step
@@ -176,6 +191,10 @@ class IKPolicy:
         self.near = near
         self.max_error = max_error
         self.keep_direction = keep_direction
+        self.limit_margin = limit_margin
+        margin = np.minimum(limit_margin * self.joint_step, (robot.upper - robot.lower) / 4)
+        #: The joint targets it commands and plans to with ``limit_margin``: that many joint steps inside the limits.
+        self._bounds = (robot.lower + margin, robot.upper - margin)
         self._target: FloatArray | None = None
         self._goal: FloatArray | None = None
         # An arm whose motors do not hold its home against gravity (one too weak for its weight in
@@ -197,19 +216,33 @@ class IKPolicy:
         clear = all(bool((z >= min(0.0, float(z[0]))).all()) for z in link_heights(self.robot, path).values())
         return clear and (self._weak or bool(holdable(self.robot, path).all()))
 
+    def _plan(self, q: FloatArray, goal: FloatArray) -> FloatArray:
+        """The joint angles to move to for ``goal``: :func:`solve_with_restarts` from ``q``, inside the
+        limits shrunk by ``limit_margin`` joint steps where a solution there reaches ``goal``."""
+
+        def plan(bounds: tuple[FloatArray, FloatArray] | None) -> tuple[FloatArray, float]:
+            return solve_with_restarts(
+                self.robot,
+                goal,
+                q,
+                restarts=self.restarts,
+                accept=lambda solution: self._feasible(q, solution),
+                near=self.near,
+                bounds=bounds,
+            )
+
+        if self.limit_margin > 0:
+            solution, distance = plan(self._bounds)
+            if distance < SOLVED:
+                return solution
+        return plan(None)[0]
+
     def act(self, q: npt.ArrayLike, target: npt.ArrayLike) -> npt.NDArray[np.float32]:
         q_arr, goal = np.asarray(q, dtype=np.float64), np.asarray(target, dtype=np.float64)
         if self.restarts > 0:
             if self._target is None or not np.array_equal(goal, self._target):
                 self._target = goal.copy()
-                self._goal, _ = solve_with_restarts(
-                    self.robot,
-                    goal,
-                    q_arr,
-                    restarts=self.restarts,
-                    accept=lambda q: self._feasible(q_arr, q),
-                    near=self.near,
-                )
+                self._goal = self._plan(q_arr, goal)
             far = float(np.linalg.norm(goal - self.robot.forward_kinematics(q_arr))) > self.near
             if self._goal is not None and far:
                 dq = self._goal - q_arr
@@ -236,7 +269,7 @@ class IKPolicy:
         would command a target outside the limits, which the paper's rule counts as a violation
         and ends the episode on. Such a joint is pulled back inside instead.
         """
-        low, high = target_bounds(self.robot)
+        low, high = self._bounds if self.limit_margin > 0 else target_bounds(self.robot)
         step = self.max_joint_step
         target = np.clip(q + np.clip(action, -1.0, 1.0) * step, low, high)
         return np.clip((target - q) / step, -1.0, 1.0).astype(np.float32)

@@ -361,11 +361,8 @@ class ArmKinematics:
         return None
 
     def forward_kinematics(self, q: npt.ArrayLike) -> FloatArray:
-        """End-effector position (m, world frame) for joint angles ``q`` of shape (dof,) or (batch, dof).
-
-        The world frame is the root link's frame moved by the base placement
-        (:attr:`base_transform`); with the default placement the two are the same.
-        """
+        """End-effector position (m) for joint angles ``q`` of shape (dof,) or (batch, dof), in the world
+        frame: the root link's frame moved by the base placement (:attr:`base_transform`)."""
         transform, _ = self._frames(self._check_q(q))
         return transform[..., :3, 3]
 
@@ -376,6 +373,10 @@ class ArmKinematics:
 
     def jacobian(self, q: npt.ArrayLike) -> FloatArray:
         """Positional Jacobian d(ee position)/dq in the world frame, shape (3, dof) or (batch, 3, dof)."""
+        return self.position_and_jacobian(q)[1]
+
+    def position_and_jacobian(self, q: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """:meth:`forward_kinematics` and :meth:`jacobian` from one walk of the chain (for IK)."""
         transform, frames = self._frames(self._check_q(q))
         ee = transform[..., :3, 3]
         jac = np.zeros((*ee.shape[:-1], 3, self.dof))  # tool joints do not move the end effector
@@ -385,7 +386,7 @@ class ArmKinematics:
             prismatic = np.array([kind == "prismatic" for _, _, kind in frames])[:, None]
             columns = np.where(prismatic, axes, cross(axes, ee[..., None, :] - origins))
             jac[..., : len(frames)] = np.swapaxes(columns, -1, -2)
-        return jac
+        return ee, jac
 
     def clip(self, q: npt.ArrayLike) -> FloatArray:
         """``q`` clipped into the joint limits."""

@@ -57,6 +57,11 @@ JOINTS, EE, TARGET, VELOCITIES, DELTA = (
 )
 
 
+#: How many joint steps inside the joint limits the task's reference controller, as a teacher
+#: (demonstrations, imitation), plans and commands its targets: under the paper's rule a target a
+#: hair past a limit ends the episode, so a student that copies a teacher resting on a limit with
+#: a small error fails there (a Stretch's clone failed on its first step: its telescope rests at 0).
+TEACHER_MARGIN = 0.5
 #: What an action may command (``control``): each joint's change, or the end effector's displacement.
 CONTROLS = ("joints", "ee")
 #: The least scale (rad, m, rad/s) an observed value is divided by under ``scaled_observation``.
@@ -353,7 +358,8 @@ class ReachTask(Task):
         return self._distance_term(distance) + self._success_term(distance)
 
     def demonstrator(self, env: Any) -> Demonstrator:
-        """The IK reference (:class:`armreach_core.robot.ik.IKPolicy` with its restarts), reading the env's joints."""
+        """The IK reference (:class:`armreach_core.robot.ik.IKPolicy` with its restarts), reading the env's
+        joints, keeping its targets :data:`TEACHER_MARGIN` joint steps inside the joint limits."""
         return _IKDemonstrator(env, self)
 
     def compute_terminated(self, achieved_goal: npt.ArrayLike, desired_goal: npt.ArrayLike, info: Any) -> Any:
@@ -374,7 +380,7 @@ class _IKDemonstrator:
     def reset(self) -> None:
         from armreach_core.robot.ik import RESTARTS, reference
 
-        self.policy = reference(self.env, restarts=RESTARTS)
+        self.policy = reference(self.env, restarts=RESTARTS, limit_margin=TEACHER_MARGIN)
 
     def act(self, observation: Any) -> npt.NDArray[np.float32]:
         return self.policy.act(self.env.backend.joint_state()[0], self.task.target)
