@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from armreach_core.errors import ConfigError
-from armreach_core.rl import runs
+from armreach_core.rl import runs, validation
 from armreach_core.rl.agents import build_model, make_vec_env
 from armreach_core.rl.checkpoints import read_progress, save_checkpoint
 from armreach_core.rl.config import RunConfig
@@ -25,15 +25,7 @@ from armreach_core.rl.learners import algo_class, configure_xla
 from armreach_core.rl.presets import RL_ALGOS
 from armreach_core.rl.stop_on_success import StopOnSuccessCallback
 from armreach_core.rl.timing import RolloutTimer, TimedVecEnv, split, write_timing
-from armreach_core.rl.validation import (
-    BATCH,
-    VALIDATION,
-    UntilSuccess,
-    Validation,
-    evaluation_envs,
-    record,
-    validate,
-)
+from armreach_core.rl.validation import UntilSuccess, Validation
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
@@ -152,9 +144,11 @@ def _imitate(
         assert until is not None
         if not judges:
             evaluation = env_kwargs(config, evaluation=True)
-            judges.extend(ArmEnv(**evaluation) for _ in range(evaluation_envs(until)))
-        result = validate(lambda obs: model.predict(obs, deterministic=True)[0], judges, until, lanes=BATCH)
-        record(run_dir / VALIDATION, int(model.num_timesteps), train_seconds(), result)
+            judges.extend(ArmEnv(**evaluation) for _ in range(validation.evaluation_envs(until)))
+        result = validation.validate(
+            lambda obs: model.predict(obs, deterministic=True)[0], judges, until, lanes=validation.BATCH
+        )
+        validation.record(run_dir / validation.VALIDATION, int(model.num_timesteps), train_seconds(), result)
         if result.passed:
             passed.append(result)
         return result
@@ -309,8 +303,8 @@ def train(
                     runs.atomic_save(run_dir / runs.MODEL, model.save)
         seconds = time.perf_counter() - t0
         passed = imitated if imitated is not None else until.passed if until is not None else None
-        validation = until.seconds if until is not None else 0.0
-        parts = split(time.perf_counter() - call_start, env.seconds, rollouts.rollouts, rollouts.between, validation)
+        evaluating = until.seconds if until is not None else 0.0
+        parts = split(time.perf_counter() - call_start, env.seconds, rollouts.rollouts, rollouts.between, evaluating)
         write_timing(run_dir, parts, trained)
         return TrainResult(run_dir, trained, config.timesteps, signals.requested, seconds, passed, kept)
     finally:
