@@ -31,15 +31,7 @@ from typing import Any
 from stable_baselines3.common.callbacks import BaseCallback
 
 from armreach_core.rl.background import BackgroundValidator, copyable, for_worker, restore, snapshot
-from armreach_core.rl.validation import (
-    BATCH,
-    VALIDATION,
-    UntilSuccess,
-    Validation,
-    evaluation_envs,
-    record,
-    validate,
-)
+from armreach_core.rl.validation import VALIDATION, Judge, UntilSuccess, Validation, record
 
 #: Evaluations asked of the worker before training waits for the oldest answer.
 MAX_PENDING = 2
@@ -66,7 +58,8 @@ class StopOnSuccessCallback(BaseCallback):
         self.make_env = make_env
         self.path = run_dir / VALIDATION
         self.train_seconds = train_seconds
-        self.envs: list[Any] = []
+        #: Evaluations in this process (no worker), recorded as the worker's answers are.
+        self.judge = Judge(spec, make_env, self.path, train_seconds)
         self.last = 0
         #: The evaluation that stopped training, if one did.
         self.passed: Validation | None = None
@@ -110,16 +103,8 @@ class StopOnSuccessCallback(BaseCallback):
 
     def _judge_here(self, steps: int) -> Validation:
         """Evaluate the model's policy in this process and record it, as the worker's answers are."""
-        if not self.envs:
-            self.envs = [self.make_env() for _ in range(evaluation_envs(self.spec))]
-        model = self.model
-
-        def policy(obs: Any) -> Any:
-            return model.predict(obs, deterministic=True)[0]
-
-        result = validate(policy, self.envs, self.spec, lanes=BATCH)
+        result = self.judge(self.model, steps)
         self.seconds += result.seconds
-        self._record(steps, result)
         if result.passed:
             self.passed = result
         elif self._better(result) and copyable(self.model.policy):
@@ -199,9 +184,7 @@ class StopOnSuccessCallback(BaseCallback):
         record(self.path, steps, self.train_seconds(), result)
 
     def _on_training_end(self) -> None:
-        for env in self.envs:
-            env.close()
-        self.envs = []
+        self.judge.close()
 
 
 __all__ = ["StopOnSuccessCallback"]

@@ -133,32 +133,29 @@ def _imitate(
         kwargs["max_episode_steps"] = int(spec["episode_steps"])
     env = ArmEnv(**kwargs)
     until = UntilSuccess.from_settings(config.settings)
-    judges: list[Any] = []
+    judge = None
     passed: list[Validation] = []
+    if until is not None:
+        evaluation = env_kwargs(config, evaluation=True)
+        judge = validation.Judge(until, lambda: ArmEnv(**evaluation), run_dir / validation.VALIDATION, train_seconds)
 
     def log(line: str) -> None:
         if stream is not None:
             print(line, file=stream, flush=True)
 
-    def judge() -> Validation:
-        assert until is not None
-        if not judges:
-            evaluation = env_kwargs(config, evaluation=True)
-            judges.extend(ArmEnv(**evaluation) for _ in range(validation.evaluation_envs(until)))
-        result = validation.validate(
-            lambda obs: model.predict(obs, deterministic=True)[0], judges, until, lanes=validation.BATCH
-        )
-        validation.record(run_dir / validation.VALIDATION, int(model.num_timesteps), train_seconds(), result)
+    def judged() -> Validation:
+        assert judge is not None
+        result = judge(model, int(model.num_timesteps))
         if result.passed:
             passed.append(result)
         return result
 
     try:
-        outcome = imitate(model, env.unwrapped, spec, config.seed, log, kwargs, judge if until is not None else None)
+        outcome = imitate(model, env.unwrapped, spec, config.seed, log, kwargs, judged if judge else None)
     finally:
         env.close()
-        for judged in judges:
-            judged.close()
+        if judge is not None:
+            judge.close()
     runs.write_json(run_dir / runs.IMITATION, outcome)
     return passed[0] if passed else None
 

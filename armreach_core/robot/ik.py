@@ -12,8 +12,13 @@ from armreach_core.robot.cartesian import displacement_action, target_bounds
 from armreach_core.robot.model import FloatArray, RobotModel
 from armreach_core.robot.statics import holdable
 
+#: The damping of a damped-least-squares step (:func:`dls_step`, :func:`solve`).
+DAMPING = 0.05
+#: How near (m) a solution must bring the end effector to its goal to count as solved.
+TOLERANCE = 1e-4
 
-def dls_step(robot: RobotModel, q: npt.ArrayLike, target: npt.ArrayLike, damping: float = 0.05) -> FloatArray:
+
+def dls_step(robot: RobotModel, q: npt.ArrayLike, target: npt.ArrayLike, damping: float = DAMPING) -> FloatArray:
     """Joint change that moves the end effector towards ``target`` (one DLS iteration)."""
     position, jac = robot.position_and_jacobian(np.asarray(q, dtype=np.float64))
     return _dls(jac, np.asarray(target, dtype=np.float64) - position, damping)
@@ -30,7 +35,7 @@ def solve(
     target: npt.ArrayLike,
     q0: npt.ArrayLike | None = None,
     iterations: int = 300,
-    tolerance: float = 1e-4,
+    tolerance: float = TOLERANCE,
     max_step: float = 0.2,
     bounds: tuple[FloatArray, FloatArray] | None = None,
 ) -> tuple[FloatArray, float]:
@@ -43,7 +48,7 @@ def solve(
     low, high = (robot.lower, robot.upper) if bounds is None else bounds
     position, jac = robot.position_and_jacobian(q)  # one walk of the chain an iteration
     for _ in range(iterations):
-        dq = _dls(jac, goal - position, 0.05)
+        dq = _dls(jac, goal - position, DAMPING)
         norm = float(np.max(np.abs(dq)))
         if norm > max_step:
             dq *= max_step / norm
@@ -54,9 +59,6 @@ def solve(
     return q, float(np.linalg.norm(goal - position))
 
 
-#: How near (m) a solution inside the shrunk limits of ``IKPolicy(limit_margin=...)`` must bring the
-#: end effector to its goal to be taken (:func:`solve`'s tolerance).
-SOLVED = 1e-4
 #: Random restarts of the IK reference's solve (``IKPolicy(restarts=RESTARTS)``): what every
 #: caller that wants the reference's behaviour passes.
 RESTARTS = 16
@@ -72,7 +74,7 @@ def solve_with_restarts(
     target: npt.ArrayLike,
     q0: npt.ArrayLike,
     restarts: int = RESTARTS,
-    tolerance: float = 1e-4,
+    tolerance: float = TOLERANCE,
     seed: int = 0,
     accept: Callable[[FloatArray], bool] | None = None,
     near: float = 0.0,
@@ -168,7 +170,7 @@ class IKPolicy:
         self,
         robot: RobotModel,
         max_joint_step: float,
-        damping: float = 0.05,
+        damping: float = DAMPING,
         gain: float = 1.0,
         *,
         restarts: int = 0,
@@ -233,7 +235,7 @@ class IKPolicy:
 
         if self.limit_margin > 0:
             solution, distance = plan(self._bounds)
-            if distance < SOLVED:
+            if distance < TOLERANCE:
                 return solution
         return plan(None)[0]
 
