@@ -3,18 +3,18 @@
 Each arm is timed as ``armreach bench`` times an env step (random actions in episodes of
 :data:`~armreach_core.diagnostics.bench.EPISODE_STEPS` from home, the best of repeats),
 against ar6 in turns in the same test, so that other load on the machine hits both alike.
-The shares are bounds under the lowest of the runs (docs/benchmarks.md, "Detailed and heavy
-arms" and "Links fixed to another, merged"); they fail if a gripper's held joints are
-simulated as joints again (Trossen's WidowX 250 s and PincherX 100, the Panda), or the links
-fixed to another as links of their own (those three and TALOS's arm), if the WidowX's
-placeholder gripper inertias reach the engines again (0.31 of ar6 with them, 0.55 without),
-or if the benchmark's episodes become random walks that leave the KUKA KR210 lying on the
-ground, or if PyBullet solves the motors by Gauss-Seidel again (the xArm7's nearly coaxial
-joints and the KR16's ground contacts need up to 200 sweeps of it a physics step), or if a
-held second arm sinks to the ground again (Baxter's), a held hand is simulated joint by joint
-(TIAGo's), every link is tested against an infinite ground plane every step (Vega's) or hulls
-keep thousands of vertices (the KR120's): those four ran at half ar6's speed or more
-when measured, and each bound sits halfway down to its arm's share before the change.
+Each bound sits halfway between the lowest share measured and the share before the change it
+guards (docs/benchmarks.md, "Detailed and heavy arms" and "Links fixed to another, merged");
+they fail if a gripper's held joints are simulated as joints again (Trossen's WidowX 250 s
+and PincherX 100, the Panda), or the links fixed to another as links of their own (those
+three and TALOS's arm), if the WidowX's placeholder gripper inertias reach the engines again
+(0.31 of ar6 with them, 0.55 without), or if the benchmark's episodes become random walks
+that leave the KUKA KR210 lying on the ground, or if PyBullet solves the motors by Gauss-Seidel
+again (the xArm7's nearly coaxial joints and the KR16's ground contacts need up to
+200 sweeps of it a physics step), or if a held second arm sinks to the ground again
+(Baxter's), a held hand is simulated joint by joint (TIAGo's), every link is tested against
+an infinite ground plane every step (Vega's) or hulls keep thousands of vertices (the
+KR120's): those four ran at half ar6's speed or more when measured.
 """
 
 from __future__ import annotations
@@ -55,10 +55,11 @@ def _share_of_ar6(arm: dict[str, Any]) -> float:
     # commit (docs/benchmarks.md). Lowest measured (two runs of `armreach bench --corpus` on
     # 2026-11-29, the CI run and two test runs on 2026-12-02): PincherX 1.27, WidowX 1.02,
     # Panda 0.84, KR210 0.74, xArm7 0.68, KR16 0.55, TALOS 0.54, Vega 0.61, Baxter 0.52, TIAGo
-    # 0.55, KR120 0.61. Regressed: with Gauss-Seidel 0.59, 0.52-0.55, 0.46-0.49, KR210 lying on
-    # the ground about 0.3, xArm7 0.37-0.38, KR16 0.39-0.41; TALOS unmerged 0.38; Vega on
-    # Bullet's plane 0.17-0.19, Baxter's held arm sinking 0.09, TIAGo's hand joint by joint
-    # 0.38, the KR120's hulls uncapped about 0.33
+    # 0.55, KR120 0.61. Regressed: with Gauss-Seidel PincherX 0.59, WidowX 0.52-0.55, Panda
+    # 0.46-0.49, xArm7 0.37-0.38, KR16 0.39-0.41; unmerged PincherX 0.74, WidowX 0.57-0.6, Panda
+    # 0.55, TALOS 0.38; the WidowX with placeholder inertias 0.31; the KR210 lying on the ground
+    # about 0.3; Vega on Bullet's plane 0.17-0.19, Baxter's held arm sinking 0.09, TIAGo's hand
+    # joint by joint 0.38, the KR120's hulls uncapped about 0.33
     [
         ("pincherx-100", 0.93),
         ("widowx-250s", 0.78),
