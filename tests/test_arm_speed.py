@@ -1,8 +1,9 @@
 """Detailed and heavy arms keep a share of the bundled arm's PyBullet speed.
 
 Each arm is timed as ``armreach bench`` times an env step (random actions in episodes of
-:data:`~armreach_core.diagnostics.bench.EPISODE_STEPS` from home, the best of repeats),
-against ar6 in turns in the same test, so that other load on the machine hits both alike.
+:data:`~armreach_core.diagnostics.bench.EPISODE_STEPS` from home, after one untimed
+episode), against ar6 in turns in the same test, so that other load on the machine hits both
+alike; the share is the median turn's.
 Each bound sits halfway between the lowest share measured and the share before the change it
 guards (docs/benchmarks.md, "Detailed and heavy arms" and "Links fixed to another, merged");
 they fail if a gripper's held joints are simulated as joints again (Trossen's WidowX 250 s
@@ -29,7 +30,7 @@ from armreach_core.diagnostics.arm_speed import ArmSpeed, corpus_speeds, save, s
 from armreach_core.diagnostics.corpus import corpus_arm
 from tests.conftest import BACKENDS
 
-STEPS, REPEATS = 1000, 5  # the best of 5 in turns: one burst of other load does not decide
+STEPS, REPEATS = 1000, 5  # the median of 5 turns: one or two bursts of other load do not decide
 
 
 def _corpus(name: str) -> dict[str, Any]:
@@ -40,7 +41,7 @@ def _corpus(name: str) -> dict[str, Any]:
 
 
 def _share_of_ar6(arm: dict[str, Any]) -> float:
-    """PyBullet env steps/s of ``arm`` over ar6's, each the best of REPEATS taken in turns."""
+    """PyBullet env steps/s of ``arm`` over ar6's, in the median of REPEATS turns."""
     own, ar6 = share_of_reference(arm, "pybullet", steps=STEPS, repeats=REPEATS)
     return own / ar6
 

@@ -4,7 +4,7 @@ A detailed description should not make the env collapse: every arm is timed as `
 bench`` times an env step (:func:`~armreach_core.diagnostics.bench.bench_env_step`: random
 actions in episodes of :data:`~armreach_core.diagnostics.bench.EPISODE_STEPS` from home),
 against the bundled arm in turns in the same process, so that other load on the machine
-hits both alike; each keeps the best of its repeats. The share is what compares across
+hits both alike; the share is that of the median turn. The share is what compares across
 machines, not the steps/s.
 """
 
@@ -43,14 +43,25 @@ def share_of_reference(
     arm: Mapping[str, Any], backend: str, *, steps: int = 1000, repeats: int = 3, episode_steps: int = EPISODE_STEPS
 ) -> tuple[float, float]:
     """Env steps/s of the env built with ``arm``'s keyword arguments and of the bundled arm's,
-    each the best of ``repeats`` taken in turns, in episodes of ``episode_steps``."""
+    from the median of ``repeats`` turns, in episodes of ``episode_steps``.
+
+    Both envs first run one untimed episode (the first steps pay for caches and lazily built
+    engine data). Each turn then times the two back to back, in alternating order, and the turn
+    whose ratio is the median is returned: a burst of other load that hits one turn, or one env
+    of a turn, moves a share no more than that turn's rank, where a ratio of two bests takes
+    whichever turn was luckiest for each env.
+    """
     envs = [ArmEnv(backend=backend, max_episode_steps=episode_steps, **kwargs) for kwargs in ({}, arm)]
     try:
-        best = [0.0, 0.0]
-        for _ in range(repeats):
-            for i, env in enumerate(envs):
-                best[i] = max(best[i], bench_env_step(env, steps, 1))
-        return best[1], best[0]
+        for env in envs:
+            bench_env_step(env, episode_steps, 1)
+        turns: list[tuple[float, float]] = []
+        for turn in range(max(repeats, 1)):
+            order = (0, 1) if turn % 2 == 0 else (1, 0)
+            rate = {i: bench_env_step(envs[i], steps, 1) for i in order}
+            turns.append((rate[1], rate[0]))
+        turns.sort(key=lambda t: t[0] / t[1])
+        return turns[(len(turns) - 1) // 2]
     finally:
         for env in envs:
             env.close()
