@@ -103,11 +103,64 @@ def test_collection_on_two_workers_gives_the_serial_data_in_seed_order() -> None
     assert len(serial.actions) == len(parallel.actions) > 5 * 10
     np.testing.assert_array_equal(np.stack(serial.observations), np.stack(parallel.observations))
     np.testing.assert_array_equal(np.stack(serial.actions), np.stack(parallel.actions))
+    assert len(serial.rooms) == len(serial.actions)
+    np.testing.assert_array_equal(np.stack(serial.rooms), np.stack(parallel.rooms))
     assert serial.outcomes == parallel.outcomes
     # the seeds drive it: other seeds, other data; a second serial run, the same data
     again, other = _collect(1, policy, seeds), _collect(1, policy, range(905, 910))
     np.testing.assert_array_equal(np.stack(serial.observations), np.stack(again.observations))
     assert not np.array_equal(np.stack(serial.observations)[:5], np.stack(other.observations)[:5])
+
+
+def test_the_room_to_the_limits_is_each_joints_distance_to_them_in_actions() -> None:
+    from armreach_core.rl.collection import limit_room
+
+    env = ArmEnv("reach", max_episode_steps=40)
+    base = env.unwrapped
+    env.reset(seed=3)
+    lower, upper, step = base.robot.lower, base.robot.upper, base.max_joint_step
+    base.backend.reset_joints(np.clip(base.robot.home + 0.3, lower, upper))
+    q = base.backend.joint_state()[0]
+    room = limit_room(base)
+    assert room is not None and room.shape == (2, base.robot.dof)
+    np.testing.assert_allclose(room[0], (upper - q) / step, rtol=1e-6)
+    np.testing.assert_allclose(room[1], (q - lower) / step, rtol=1e-6)
+    env.close()
+    ee = ArmEnv("reach", control="ee", max_episode_steps=40)
+    ee.reset(seed=3)
+    assert limit_room(ee.unwrapped) is None  # its actions move the end effector, not each joint by a step
+    ee.close()
+
+
+def test_the_limit_loss_keeps_the_cloned_actions_inside_their_room() -> None:
+    pytest.importorskip("stable_baselines3")
+    import torch as th
+    from stable_baselines3 import SAC
+
+    from armreach_core.rl.collection import Dataset
+    from armreach_core.rl.imitation import fit
+
+    env = ArmEnv("reach", max_episode_steps=40)
+    rng = np.random.default_rng(0)
+    dof = env.unwrapped.robot.dof
+    observations = rng.normal(size=(256, int(np.prod(env.observation_space.shape)))).astype(np.float32)
+    # every label asks for a full step up; half the states have only 0.4 of a step to their upper limit
+    tight = np.arange(256) % 2 == 0
+    predictions = {}
+    for weight in (0.0, 20.0):
+        model = SAC("MlpPolicy", env, policy_kwargs={"net_arch": [64, 64]}, seed=1, device="cpu")
+        data = Dataset()
+        for obs, narrow in zip(observations, tight, strict=True):
+            room = np.full((2, dof), 1e3, dtype=np.float32)
+            room[0] = 0.4 if narrow else 1e3
+            data.add(obs, np.full(dof, 1.0, dtype=np.float32), room)
+        fit(model, data, 300, 64, 1e-3, 0, limit_weight=weight, limit_margin=0.1)
+        predicted = model.policy._predict(th.as_tensor(observations[tight]), deterministic=True)
+        predictions[weight] = predicted.detach().numpy()
+    env.close()
+    assert float(predictions[0.0].mean()) > 0.9  # the labels alone: past the room (measured 0.99)
+    # with the loss, (a - 1)^2 + 20 relu(a - 0.3)^2 is least at 0.3 + 0.7 / 21 = 0.33: measured 0.36 on average
+    assert 0.3 < float(predictions[20.0].mean()) < 0.42 and float(predictions[20.0].max()) < 0.5
 
 
 JUDGED = """

@@ -26,19 +26,45 @@ import numpy.typing as npt
 CHUNKS_PER_WORKER = 8
 
 
+#: The largest room to a limit recorded, in actions (a continuous joint's is infinite).
+MAX_ROOM = 1e3
+
+
 class Dataset:
-    """Observations and the controller's actions for them, grown round by round."""
+    """Observations and the controller's actions for them, grown round by round; with each state,
+    where the env maps an action to joint steps, the room to the joint limits (:func:`limit_room`)."""
 
     def __init__(self) -> None:
         self.observations: list[npt.NDArray[np.float32]] = []
         self.actions: list[npt.NDArray[np.float32]] = []
+        self.rooms: list[npt.NDArray[np.float32]] = []
 
-    def add(self, observation: Any, action: npt.NDArray[np.float32]) -> None:
+    def add(self, observation: Any, action: npt.NDArray[np.float32], room: npt.NDArray[np.float32] | None) -> None:
         self.observations.append(np.asarray(observation, dtype=np.float32).ravel())
         self.actions.append(np.asarray(action, dtype=np.float32))
+        if room is not None:
+            self.rooms.append(room)
+
+    def extend(self, other: Dataset | Collected) -> None:
+        self.observations += other.observations
+        self.actions += other.actions
+        self.rooms += other.rooms
 
     def __len__(self) -> int:
         return len(self.actions)
+
+
+def limit_room(env: Any) -> npt.NDArray[np.float32] | None:
+    """How far an action may move each joint before its target passes a limit, in actions: the
+    rows up and down, from the joints' angles now (negative past a limit). None where the env's
+    task maps actions otherwise than ``q + action * max_joint_step``."""
+    if not env.task.moves_joints_by_action():
+        return None
+    q = env.backend.joint_state()[0]
+    step = env.max_joint_step
+    room = np.stack([(env.robot.upper - q) / step, (q - env.robot.lower) / step])
+    clipped: npt.NDArray[np.float32] = np.clip(room, -MAX_ROOM, MAX_ROOM).astype(np.float32)
+    return clipped
 
 
 def episode(
@@ -60,7 +86,7 @@ def episode(
     touched = False
     while True:
         expert = np.asarray(demonstrator.act(obs), dtype=np.float32)
-        data.add(obs, expert)
+        data.add(obs, expert, limit_room(env))
         action = expert if learner is None or rng.random() < beta else learner(obs)
         if noise > 0:
             action = np.clip(action + rng.normal(0.0, noise, action.shape), -1.0, 1.0).astype(np.float32)
@@ -77,11 +103,13 @@ class Collected:
     observations: list[npt.NDArray[np.float32]] = field(default_factory=list)
     actions: list[npt.NDArray[np.float32]] = field(default_factory=list)
     outcomes: list[dict[str, bool]] = field(default_factory=list)
+    rooms: list[npt.NDArray[np.float32]] = field(default_factory=list)
 
     def extend(self, other: Collected) -> None:
         self.observations += other.observations
         self.actions += other.actions
         self.outcomes += other.outcomes
+        self.rooms += other.rooms
 
 
 @dataclass(frozen=True)
@@ -109,7 +137,7 @@ def run_seeds(env: Any, demonstrator: Any, seeds: Sequence[int], rollout: Rollou
     for seed in seeds:
         rng = np.random.default_rng([*rollout.key, seed])
         outcomes.append(episode(env, demonstrator, data, seed, learner, rollout.beta, rng, rollout.noise))
-    return Collected(data.observations, data.actions, outcomes)
+    return Collected(data.observations, data.actions, outcomes, data.rooms)
 
 
 # One env and its controller per worker process, built once by its initializer.

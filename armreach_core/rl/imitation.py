@@ -23,6 +23,13 @@ Each fit takes ``G`` Adam steps of ``batch_size`` samples, the run's learning ra
 ``timesteps`` of reinforcement learning follow from the cloned actor (0: none). The env
 steps of imitation are reported apart from the run's own (``imitation.json``).
 
+``limit_weight: w`` adds to each fit's loss ``w`` times the mean square of how far an action
+would take a joint's target past its limit, less the controller's own margin (its
+``limit_margin``, in actions): the states record each joint's room to its limits
+(:func:`armreach_core.rl.collection.limit_room`). Under the paper's rule such a target ends the
+episode, and a clone's small errors near a limit the controller rests on were its commonest
+failure.
+
 ``episode_steps: S`` ends imitation's episodes after ``S`` steps instead of the training env's
 ``max_episode_steps``: a large arm's reference may need more steps to a far target than a
 training episode holds, and a demonstration cut short never shows the end of its path.
@@ -52,13 +59,31 @@ ROLLOUT_SEED = DEMO_SEED + 500_000
 __all__ = ["ROLLOUT_SEED", "Dataset", "episode", "fit", "imitate"]
 
 
-def fit(model: Any, data: Dataset, steps: int, batch_size: int, learning_rate: float, seed: int) -> float:
-    """Fit ``model``'s actor to ``data`` (``steps`` Adam steps); the mean loss of the last tenth."""
+def fit(
+    model: Any,
+    data: Dataset,
+    steps: int,
+    batch_size: int,
+    learning_rate: float,
+    seed: int,
+    *,
+    limit_weight: float = 0.0,
+    limit_margin: float = 0.0,
+) -> float:
+    """Fit ``model``'s actor to ``data`` (``steps`` Adam steps); the mean loss of the last tenth.
+
+    With ``limit_weight`` and a room to the limits for every state (:attr:`Dataset.rooms`), the
+    loss adds that weight times the mean square of how far each predicted action goes past its
+    room less ``limit_margin`` (the controller's own margin, so that its labels cost nothing).
+    """
     import torch as th
 
     policy = model.policy
     obs = th.as_tensor(np.stack(data.observations), device=model.device)
     target = th.as_tensor(np.stack(data.actions), device=model.device)
+    rooms = None
+    if limit_weight > 0 and data.rooms and len(data.rooms) == len(data):
+        rooms = th.as_tensor(np.stack(data.rooms), device=model.device) - limit_margin
     parameters = list(model.actor.parameters())
     optimizer = th.optim.Adam(parameters, lr=learning_rate)
     generator = th.Generator().manual_seed(seed)
@@ -68,6 +93,10 @@ def fit(model: Any, data: Dataset, steps: int, batch_size: int, learning_rate: f
         index = th.randint(len(target), (min(batch_size, len(target)),), generator=generator)
         predicted = policy._predict(obs[index], deterministic=True)
         loss = th.nn.functional.mse_loss(predicted, target[index])
+        if rooms is not None:  # past the room up (row 0) or down (row 1): the paper's rule ends the episode
+            room = rooms[index]
+            past = th.relu(predicted - room[:, 0]) + th.relu(-predicted - room[:, 1])
+            loss = loss + limit_weight * past.square().mean()
         optimizer.zero_grad()
         loss.backward()  # type: ignore[no-untyped-call]
         optimizer.step()
@@ -101,6 +130,10 @@ def imitate(
     noise, workers = float(spec.get("noise", 0.0)), int(spec.get("workers", 1))
     steps, batch = int(spec.get("gradient_steps", 2000)), int(model.batch_size)
     rate = float(model.lr_schedule(1.0))
+    limits = {
+        "limit_weight": float(spec.get("limit_weight", 0.0)),
+        "limit_margin": float(getattr(demonstrator, "limit_margin", 0.0)),
+    }
     data = Dataset()
     stages: list[dict[str, Any]] = []
     with Collector(env, demonstrator, env_kwargs, workers) as collector:
@@ -114,14 +147,13 @@ def imitate(
             )
             before = len(data)
             collected = collector.run(range(first, first + count), rollout)
-            data.observations += collected.observations
-            data.actions += collected.actions
+            data.extend(collected)
             outcomes = collected.outcomes
             if stage == 0:
                 from armreach_core.rl.standardize import standardize_from
 
                 standardize_from(model, np.stack(data.observations))
-            loss = fit(model, data, steps, batch, rate, seed + stage)
+            loss = fit(model, data, steps, batch, rate, seed + stage, **limits)
             record = {
                 "stage": "demonstrations" if stage == 0 else f"dagger {stage}",
                 "episodes": count,

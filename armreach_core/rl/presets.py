@@ -204,6 +204,7 @@ IMITATION_SCHEMA: dict[str, Check] = {
     "noise": _num(float, 0.0),
     "workers": _num(int, 1),
     "episode_steps": _num(int, 1),
+    "limit_weight": _num(float, 0.0),
 }
 HER_SCHEMA: dict[str, Check] = {
     "n_sampled_goal": _num(int, 1),

@@ -373,6 +373,9 @@ _OWN_SCORING = (ReachTask.step_info, ReachTask.compute_reward, ReachTask.compute
 class _IKDemonstrator:
     """The IK reference as a :class:`~armreach_core.task.Demonstrator` of ``task`` in ``env``."""
 
+    #: How far inside the limits its targets stay, in actions (imitation's limit loss reads it).
+    limit_margin = TEACHER_MARGIN
+
     def __init__(self, env: Any, task: ReachTask) -> None:
         self.env, self.task = env, task
         self.reset()
