@@ -30,14 +30,14 @@ CHUNKS_PER_WORKER = 8
 MAX_ROOM = 1e3
 
 
+@dataclass
 class Dataset:
     """Observations and the controller's actions for them, grown round by round; with each state,
     where the env maps an action to joint steps, the room to the joint limits (:func:`limit_room`)."""
 
-    def __init__(self) -> None:
-        self.observations: list[npt.NDArray[np.float32]] = []
-        self.actions: list[npt.NDArray[np.float32]] = []
-        self.rooms: list[npt.NDArray[np.float32]] = []
+    observations: list[npt.NDArray[np.float32]] = field(default_factory=list)
+    actions: list[npt.NDArray[np.float32]] = field(default_factory=list)
+    rooms: list[npt.NDArray[np.float32]] = field(default_factory=list)
 
     def add(self, observation: Any, action: npt.NDArray[np.float32], room: npt.NDArray[np.float32] | None) -> None:
         self.observations.append(np.asarray(observation, dtype=np.float32).ravel())
@@ -45,7 +45,7 @@ class Dataset:
         if room is not None:
             self.rooms.append(room)
 
-    def extend(self, other: Dataset | Collected) -> None:
+    def extend(self, other: Dataset) -> None:
         self.observations += other.observations
         self.actions += other.actions
         self.rooms += other.rooms
@@ -97,19 +97,15 @@ def episode(
 
 
 @dataclass
-class Collected:
-    """Observations, the controller's labels and each episode's outcome, in seed order."""
+class Collected(Dataset):
+    """A :class:`Dataset` of episodes run in seed order, with each episode's outcome."""
 
-    observations: list[npt.NDArray[np.float32]] = field(default_factory=list)
-    actions: list[npt.NDArray[np.float32]] = field(default_factory=list)
     outcomes: list[dict[str, bool]] = field(default_factory=list)
-    rooms: list[npt.NDArray[np.float32]] = field(default_factory=list)
 
-    def extend(self, other: Collected) -> None:
-        self.observations += other.observations
-        self.actions += other.actions
-        self.outcomes += other.outcomes
-        self.rooms += other.rooms
+    def extend(self, other: Dataset) -> None:
+        super().extend(other)
+        if isinstance(other, Collected):
+            self.outcomes += other.outcomes
 
 
 @dataclass(frozen=True)
@@ -125,7 +121,7 @@ class Rollout:
 
 def run_seeds(env: Any, demonstrator: Any, seeds: Sequence[int], rollout: Rollout) -> Collected:
     """The episodes of ``seeds`` in ``env``, one after another (see the module docstring)."""
-    data, outcomes = Dataset(), []
+    data = Collected()
     learner = None
     if rollout.policy is not None:
         policy = rollout.policy
@@ -136,8 +132,8 @@ def run_seeds(env: Any, demonstrator: Any, seeds: Sequence[int], rollout: Rollou
 
     for seed in seeds:
         rng = np.random.default_rng([*rollout.key, seed])
-        outcomes.append(episode(env, demonstrator, data, seed, learner, rollout.beta, rng, rollout.noise))
-    return Collected(data.observations, data.actions, outcomes, data.rooms)
+        data.outcomes.append(episode(env, demonstrator, data, seed, learner, rollout.beta, rng, rollout.noise))
+    return data
 
 
 # One env and its controller per worker process, built once by its initializer.
