@@ -64,7 +64,8 @@ def clean_action(policy: Any, obs: Any) -> Any:
 
     For SAC (no gSDE) the tanh of the actor's mean, the mode ``policy._predict`` returns, without
     the log-std head and the distribution it also builds: the same values and gradients, bit for
-    bit, in about seven eighths of a fit's time. Other actors (TD3, DDPG) go through ``_predict``.
+    bit; with Adam's ``foreach`` a fit takes a tenth less time. Other actors (TD3, DDPG) go
+    through ``_predict``.
     """
     import torch as th
 
