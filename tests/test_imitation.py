@@ -73,6 +73,11 @@ def test_imitation_needs_the_sb3_learner_and_steps_need_imitation(tmp_path: Path
     preset.write_text(CLONE.replace("    imitation:", "    # imitation:"))
     with pytest.raises(ConfigError, match="0 only with the preset key imitation"):
         resolve_config(algo="sac", preset=str(preset))
+    preset.write_text(CLONE.replace("beta: 0.5}", "beta: 0.5, fit_threads: 2}"))
+    assert resolve_config(algo="sac", preset=str(preset)).settings["imitation"]["fit_threads"] == 2
+    preset.write_text(CLONE.replace("beta: 0.5}", "beta: 0.5, fit_threads: -1}"))
+    with pytest.raises(ConfigError, match="fit_threads: must be >= 0"):
+        resolve_config(algo="sac", preset=str(preset))
 
 
 def _collect(workers: int, policy: object, seeds: range) -> object:
@@ -161,6 +166,43 @@ def test_the_limit_loss_keeps_the_cloned_actions_inside_their_room() -> None:
     assert float(predictions[0.0].mean()) > 0.9  # the labels alone: past the room (measured 0.99)
     # with the loss, (a - 1)^2 + 20 relu(a - 0.3)^2 is least at 0.3 + 0.7 / 21 = 0.33: measured 0.36 on average
     assert 0.3 < float(predictions[20.0].mean()) < 0.42 and float(predictions[20.0].max()) < 0.5
+
+
+def test_a_fit_on_more_threads_is_repeatable_and_gives_the_thread_count_back() -> None:
+    """``fit_threads``: the fit runs on that many torch threads, the same weights each time, and
+    the caller's thread count is back afterwards, also when the fit fails."""
+    pytest.importorskip("stable_baselines3")
+    import torch as th
+    from stable_baselines3 import SAC
+
+    from armreach_core.rl.collection import Dataset
+    from armreach_core.rl.imitation import fit
+
+    env = ArmEnv("reach", max_episode_steps=40)
+    rng = np.random.default_rng(0)
+    shape, dof = int(np.prod(env.observation_space.shape)), env.unwrapped.robot.dof
+    data = Dataset()
+    for _ in range(512):
+        data.add(rng.normal(size=shape).astype(np.float32), rng.uniform(-1, 1, dof).astype(np.float32), None)
+    before = th.get_num_threads()
+    th.set_num_threads(1)
+    try:
+        weights, losses = [], []
+        for threads in (2, 2, 0):
+            model = SAC("MlpPolicy", env, policy_kwargs={"net_arch": [128, 128]}, seed=1, device="cpu")
+            losses.append(fit(model, data, 200, 128, 1e-3, 0, threads=threads))
+            assert th.get_num_threads() == 1
+            weights.append([p.detach().clone() for p in model.actor.parameters()])
+        assert all(th.equal(a, b) for a, b in zip(weights[0], weights[1], strict=True))  # repeatable
+        # on one thread the same fit up to rounding (measured 1e-6 apart), and it fits: below the labels' variance
+        # of 1/3 (measured 0.14)
+        assert losses[2] == pytest.approx(losses[0], rel=1e-3) and losses[0] < 0.2
+        with pytest.raises(ValueError, match="at least one array"):
+            fit(model, Dataset(), 10, 128, 1e-3, 0, threads=2)  # no data
+        assert th.get_num_threads() == 1
+    finally:
+        th.set_num_threads(before)
+        env.close()
 
 
 def test_the_fits_clean_action_is_the_policys_mode_bit_for_bit_with_its_gradient() -> None:

@@ -23,6 +23,10 @@ Each fit takes ``G`` Adam steps of ``batch_size`` samples, the run's learning ra
 ``timesteps`` of reinforcement learning follow from the cloned actor (0: none). The env
 steps of imitation are reported apart from the run's own (``imitation.json``).
 
+``fit_threads: T`` runs each fit on ``T`` torch threads, the run's own (``torch_threads``)
+again after it: the collection's worker processes wait while the actor is fitted, so their
+cores are free (on 2 cores, 2 threads fit a 256x256 actor about 1.4 times as fast).
+
 ``limit_weight: w`` adds to each fit's loss ``w`` times the mean square of how far an action
 would take a joint's target past its limit, less the controller's own margin (its
 ``limit_margin``, in actions): the states record each joint's room to its limits
@@ -86,14 +90,33 @@ def fit(
     *,
     limit_weight: float = 0.0,
     limit_margin: float = 0.0,
+    threads: int = 0,
 ) -> float:
     """Fit ``model``'s actor to ``data`` (``steps`` Adam steps); the mean loss of the last tenth.
 
     With ``limit_weight`` and a room to the limits for every state (:attr:`Dataset.rooms`), the
     loss adds that weight times the mean square of how far each predicted action goes past its
     room less ``limit_margin`` (the controller's own margin, so that its labels cost nothing).
+    With ``threads`` above 0 the fit runs on that many torch threads, and the caller's number after it.
     """
     import torch as th
+
+    if threads > 0:
+        before = th.get_num_threads()
+        th.set_num_threads(threads)
+        try:
+            return fit(
+                model,
+                data,
+                steps,
+                batch_size,
+                learning_rate,
+                seed,
+                limit_weight=limit_weight,
+                limit_margin=limit_margin,
+            )
+        finally:
+            th.set_num_threads(before)
 
     policy = model.policy
     obs = th.as_tensor(np.stack(data.observations), device=model.device)
@@ -151,6 +174,7 @@ def imitate(
         "limit_weight": float(spec.get("limit_weight", 0.0)),
         "limit_margin": float(getattr(demonstrator, "limit_margin", 0.0)),
     }
+    threads = int(spec.get("fit_threads", 0))
     data = Dataset()
     stages: list[dict[str, Any]] = []
     with Collector(env, demonstrator, env_kwargs, workers) as collector:
@@ -170,7 +194,7 @@ def imitate(
                 from armreach_core.rl.standardize import standardize_from
 
                 standardize_from(model, np.stack(data.observations))
-            loss = fit(model, data, steps, batch, rate, seed + stage, **limits)
+            loss = fit(model, data, steps, batch, rate, seed + stage, threads=threads, **limits)
             record = {
                 "stage": "demonstrations" if stage == 0 else f"dagger {stage}",
                 "episodes": count,

@@ -205,6 +205,7 @@ IMITATION_SCHEMA: dict[str, Check] = {
     "workers": _num(int, 1),
     "episode_steps": _num(int, 1),
     "limit_weight": _num(float, 0.0),
+    "fit_threads": _num(int, 0, 64),
 }
 HER_SCHEMA: dict[str, Check] = {
     "n_sampled_goal": _num(int, 1),
