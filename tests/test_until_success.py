@@ -139,14 +139,19 @@ def test_a_bad_until_success_section_is_refused_naming_the_key(section: dict[str
         validate_settings("ppo", {"until_success": section}, "fast.reach.ppo")
 
 
-@pytest.mark.parametrize("name", ["fast", "any-arm", "any-arm-rl"])
-def test_the_fast_and_any_arm_presets_stop_at_98_percent_on_100_held_out_targets(name: str) -> None:
+@pytest.mark.parametrize(
+    ("name", "rule"),
+    # any-arm's judge is cheap (it stops at the deciding failure) and 98 % of 100 passed clones that
+    # scored 89-94 % on further targets: 97 % of 400 passes a clone only when it is near 95 % or above
+    [("fast", (0.98, 100)), ("any-arm", (0.97, 400)), ("any-arm-rl", (0.98, 100))],
+)
+def test_the_fast_and_any_arm_presets_stop_on_held_out_targets(name: str, rule: tuple[float, int]) -> None:
     from armreach_core.rl.presets import load_preset
 
     preset = load_preset(name)
     for algo in preset.algos("reach"):
         spec = UntilSuccess.from_settings(preset.get("reach", algo))
-        assert spec is not None and (spec.threshold, spec.episodes) == (0.98, 100), algo
+        assert spec is not None and (spec.threshold, spec.episodes) == rule, algo
 
 
 def _run(argv: list[str]) -> tuple[int, str, str]:
