@@ -176,7 +176,7 @@ def test_a_fit_on_more_threads_is_repeatable_and_gives_the_thread_count_back() -
     from stable_baselines3 import SAC
 
     from armreach_core.rl.collection import Dataset
-    from armreach_core.rl.imitation import fit
+    from armreach_core.rl.imitation import fit, torch_threads
 
     env = ArmEnv("reach", max_episode_steps=40)
     rng = np.random.default_rng(0)
@@ -190,15 +190,16 @@ def test_a_fit_on_more_threads_is_repeatable_and_gives_the_thread_count_back() -
         weights, losses = [], []
         for threads in (2, 2, 0):
             model = SAC("MlpPolicy", env, policy_kwargs={"net_arch": [128, 128]}, seed=1, device="cpu")
-            losses.append(fit(model, data, 200, 128, 1e-3, 0, threads=threads))
+            with torch_threads(threads):
+                losses.append(fit(model, data, 200, 128, 1e-3, 0))
             assert th.get_num_threads() == 1
             weights.append([p.detach().clone() for p in model.actor.parameters()])
         assert all(th.equal(a, b) for a, b in zip(weights[0], weights[1], strict=True))  # repeatable
         # on one thread the same fit up to rounding (measured 1e-6 apart), and it fits: below the labels' variance
         # of 1/3 (measured 0.14)
         assert losses[2] == pytest.approx(losses[0], rel=1e-3) and losses[0] < 0.2
-        with pytest.raises(ValueError, match="at least one array"):
-            fit(model, Dataset(), 10, 128, 1e-3, 0, threads=2)  # no data
+        with pytest.raises(ValueError, match="at least one array"), torch_threads(2):
+            fit(model, Dataset(), 10, 128, 1e-3, 0)  # no data
         assert th.get_num_threads() == 1
     finally:
         th.set_num_threads(before)

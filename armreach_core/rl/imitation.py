@@ -47,8 +47,9 @@ Implemented for the SB3 learner, whose actors are PyTorch modules.
 
 from __future__ import annotations
 
+import contextlib
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from typing import Any
 
 import numpy as np
@@ -60,7 +61,7 @@ from armreach_core.rl.validation import Validation
 #: Seeds of the learner's rollouts start here, past any demonstration episode's.
 ROLLOUT_SEED = DEMO_SEED + 500_000
 
-__all__ = ["ROLLOUT_SEED", "Dataset", "episode", "fit", "imitate"]
+__all__ = ["ROLLOUT_SEED", "Dataset", "episode", "fit", "imitate", "torch_threads"]
 
 
 def clean_action(policy: Any, obs: Any) -> Any:
@@ -80,6 +81,20 @@ def clean_action(policy: Any, obs: Any) -> Any:
     return policy._predict(obs, deterministic=True)
 
 
+@contextlib.contextmanager
+def torch_threads(threads: int) -> Iterator[None]:
+    """Run the block on ``threads`` torch threads (0: as many as now), the number before it after it."""
+    import torch as th
+
+    before = th.get_num_threads()
+    if threads > 0:
+        th.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        th.set_num_threads(before)
+
+
 def fit(
     model: Any,
     data: Dataset,
@@ -90,33 +105,14 @@ def fit(
     *,
     limit_weight: float = 0.0,
     limit_margin: float = 0.0,
-    threads: int = 0,
 ) -> float:
     """Fit ``model``'s actor to ``data`` (``steps`` Adam steps); the mean loss of the last tenth.
 
     With ``limit_weight`` and a room to the limits for every state (:attr:`Dataset.rooms`), the
     loss adds that weight times the mean square of how far each predicted action goes past its
     room less ``limit_margin`` (the controller's own margin, so that its labels cost nothing).
-    With ``threads`` above 0 the fit runs on that many torch threads, and the caller's number after it.
     """
     import torch as th
-
-    if threads > 0:
-        before = th.get_num_threads()
-        th.set_num_threads(threads)
-        try:
-            return fit(
-                model,
-                data,
-                steps,
-                batch_size,
-                learning_rate,
-                seed,
-                limit_weight=limit_weight,
-                limit_margin=limit_margin,
-            )
-        finally:
-            th.set_num_threads(before)
 
     policy = model.policy
     obs = th.as_tensor(np.stack(data.observations), device=model.device)
@@ -194,7 +190,8 @@ def imitate(
                 from armreach_core.rl.standardize import standardize_from
 
                 standardize_from(model, np.stack(data.observations))
-            loss = fit(model, data, steps, batch, rate, seed + stage, threads=threads, **limits)
+            with torch_threads(threads):
+                loss = fit(model, data, steps, batch, rate, seed + stage, **limits)
             record = {
                 "stage": "demonstrations" if stage == 0 else f"dagger {stage}",
                 "episodes": count,
