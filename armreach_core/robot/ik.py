@@ -51,6 +51,11 @@ def solve(
     position, jac = robot.position_and_jacobian(q)  # one walk of the chain an iteration
     for _ in range(iterations):
         dq = _dls(jac, goal - position, DAMPING)
+        blocked = ((q <= low) & (dq < 0)) | ((q >= high) & (dq > 0))
+        if blocked.any() and not blocked.all():  # those joints rest on a bound: the others do the step
+            free = ~blocked
+            dq = np.zeros_like(dq)
+            dq[free] = _dls(jac[:, free], goal - position, DAMPING)
         norm = float(np.max(np.abs(dq)))
         if norm > max_step:
             dq *= max_step / norm
