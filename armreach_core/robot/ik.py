@@ -43,7 +43,9 @@ def solve(
 ) -> tuple[FloatArray, float]:
     """Joint angles whose end effector is near ``target``; returns (q, remaining distance in m).
 
-    ``bounds`` (lowest, highest) keep the solution inside them instead of the joint limits.
+    ``bounds`` (lowest, highest) keep the solution inside them instead of the joint limits. A
+    joint that rests on a bound the step would push it past is held out of that step, so that the
+    other joints take it instead of the clipped remainder creeping on (the KR210's shoulder).
     """
     q = robot.home.copy() if q0 is None else np.asarray(q0, dtype=np.float64).copy()
     goal = np.asarray(target, dtype=np.float64)
