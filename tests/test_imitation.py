@@ -13,6 +13,7 @@ from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
 from armreach_core.rl import runs
 from armreach_core.rl.config import resolve_config
+from armreach_core.rl.timing import PARTS, read_timing
 
 pytestmark = pytest.mark.training
 
@@ -45,6 +46,10 @@ def test_a_cloned_run_acts_like_the_reference_and_evaluates(tmp_path: Path) -> N
     assert first["stage"] == "demonstrations" and first["success_rate"] == 1.0 and first["expert_share"] == 1.0
     assert dagger["expert_share"] == 0.5 and dagger["episodes"] == 3
     assert record["env_steps"] == first["states"] + dagger["states"] == dagger["dataset"]
+    timing = read_timing(run_dir)  # imitation's time is its own part, not the set-up's
+    stages = first["seconds"] + dagger["seconds"]
+    assert stages <= timing["imitation"] <= timing["total"]
+    assert sum(timing[part] for part in PARTS) == pytest.approx(timing["total"], abs=0.01)
     model = SAC.load(run_dir / runs.MODEL, device="cpu")
     extractor = model.actor.features_extractor
     assert isinstance(extractor, Standardize) and float(extractor.std.min()) > 0

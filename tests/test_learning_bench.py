@@ -122,6 +122,9 @@ def test_bench_arms_name_the_rows_and_the_commands(tmp_path: Path) -> None:
     assert [(row["arm"], row["seeds"]) for row in rows] == [("ur5", 2), ("so101", 1)]  # in the order they ran
     table = to_markdown(rows)
     assert table.splitlines()[0].startswith("| arm | backend |") and "| so101 | pybullet | sac | 1/1 | 50.0 |" in table
+    assert "imitation" not in table  # runs that do not imitate do not show the part
+    imitating = LearningRun("pybullet", "sac", 0, 20.0, 0, True, 0.98, {"imitation": 15.0, "setup": 1.0, "start": 4.0})
+    assert "learner 0 / imitation 75 / start 25 %" in to_markdown(summarize([imitating]))
     bundled = to_markdown(summarize([_run_record("ppo", 0, 30.0, True)]))
     assert bundled.splitlines()[0].startswith("| backend |")  # no arm column when every run is on the bundled arm
 

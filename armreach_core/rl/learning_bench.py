@@ -191,6 +191,8 @@ def to_markdown(rows: Sequence[dict[str, object]]) -> str:
         assert isinstance(value, dict)
         names = {"env": "env", "rollout_other": "policy", "validation": "eval", "learner": "learner"}
         shown = [f"{names[k]} {100 * value[k]:.0f}" for k in names]
+        if value.get("imitation", 0.0) > 0:  # only runs that imitate spend time there
+            shown.append(f"imitation {100 * value['imitation']:.0f}")
         rest = value["setup"] + value["start"]
         return " / ".join([*shown, f"start {100 * rest:.0f}"]) + " %"
 

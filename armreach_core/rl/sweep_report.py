@@ -125,15 +125,17 @@ def _time_split(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     if not timed:
         return []
     names = {"env": "env", "rollout_other": "policy, buffer", "validation": "held-out evaluations",
-             "learner": "learner", "setup": "set-up"}  # fmt: skip
+             "learner": "learner", "imitation": "imitation", "setup": "set-up"}  # fmt: skip
+    # imitation's column only where a trial imitated
+    parts = [p for p in PARTS if p != "imitation" or any(r["timing"].get(p, 0.0) > 0 for r in timed)]
     table = markdown_table(
-        ("trial", "training (min)", "env steps/s", *(f"{names[p]} %" for p in PARTS), "nice"),
+        ("trial", "training (min)", "env steps/s", *(f"{names[p]} %" for p in parts), "nice"),
         (
             (
                 r["trial"],
                 f"{r['timing']['total'] / 60:.1f}",
                 f"{r['timing'].get('timesteps', float('nan')) / r['timing']['total']:,.0f}",
-                *(f"{100 * r['timing'].get(p, 0.0) / r['timing']['total']:.0f}" for p in PARTS),
+                *(f"{100 * r['timing'].get(p, 0.0) / r['timing']['total']:.0f}" for p in parts),
                 "–" if r.get("nice") is None else r["nice"],
             )
             for r in timed

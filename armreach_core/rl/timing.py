@@ -9,6 +9,8 @@ folder:
   noise, storing transitions, callbacks);
 * ``validation``: held-out evaluations of ``until_success`` (:mod:`armreach_core.rl.validation`);
 * ``learner``: between rollouts (the gradient updates, and the learner's first JIT compilation);
+* ``imitation``: imitation before any reinforcement learning (preset key ``imitation``: the
+  reference's episodes, the fits and their held-out evaluations, :mod:`armreach_core.rl.imitation`);
 * ``setup``: the rest of the ``train`` call (building envs and the model, checkpoints at the end).
 
 ``armreach bench --learning`` reports these shares per algorithm.
@@ -28,7 +30,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 #: The run-folder file that holds the split.
 TIMING = "timing.json"
 #: Its parts, in the order they are shown.
-PARTS = ("env", "rollout_other", "validation", "learner", "setup")
+PARTS = ("env", "rollout_other", "validation", "learner", "imitation", "setup")
 
 
 class TimedVecEnv(VecEnvWrapper):
@@ -88,14 +90,17 @@ class RolloutTimer(BaseCallback):
         self._mark = None
 
 
-def split(total: float, env: float, rollouts: float, between: float, validation: float) -> dict[str, float]:
+def split(
+    total: float, env: float, rollouts: float, between: float, validation: float, imitation: float = 0.0
+) -> dict[str, float]:
     """The parts of a ``train`` call of ``total`` seconds (see the module's docstring)."""
     return {
         "env": env,
         "rollout_other": max(rollouts - env - validation, 0.0),
         "validation": validation,
         "learner": between,
-        "setup": max(total - rollouts - between, 0.0),
+        "imitation": imitation,
+        "setup": max(total - rollouts - between - imitation, 0.0),
         "total": total,
     }
 

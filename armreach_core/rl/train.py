@@ -235,6 +235,7 @@ def train(
     t0 = time.perf_counter()  # training time includes demonstrations and imitation
     imitated: Validation | None = None  # a held-out evaluation passed during imitation
     base_seconds = 0.0  # a resumed run's earlier training time, read from its checkpoint below
+    imitation_seconds = 0.0
 
     def train_seconds() -> float:
         return base_seconds + time.perf_counter() - t0
@@ -248,7 +249,9 @@ def train(
             if "demonstrations" in config.settings:
                 _demonstrate(config, model, run_dir)
             if "imitation" in config.settings:
+                started = time.perf_counter()
                 imitated = _imitate(config, model, run_dir, stream, train_seconds)
+                imitation_seconds = time.perf_counter() - started
         # Written once the model exists, so that a folder with a config always has something to resume
         # or is safe to start over (see runs.new_run_dir).
         runs.write_config(run_dir, config)
@@ -301,7 +304,14 @@ def train(
         seconds = time.perf_counter() - t0
         passed = imitated if imitated is not None else until.passed if until is not None else None
         evaluating = until.seconds if until is not None else 0.0
-        parts = split(time.perf_counter() - call_start, env.seconds, rollouts.rollouts, rollouts.between, evaluating)
+        parts = split(
+            time.perf_counter() - call_start,
+            env.seconds,
+            rollouts.rollouts,
+            rollouts.between,
+            evaluating,
+            imitation_seconds,
+        )
         write_timing(run_dir, parts, trained)
         return TrainResult(run_dir, trained, config.timesteps, signals.requested, seconds, passed, kept)
     finally:
