@@ -87,6 +87,32 @@ def test_a_batch_s_jacobian_is_each_pose_s_with_numpy_s_cross_products_to_the_bi
     assert np.array_equal(cross(a[0, 0], b[:, 1]), np.cross(a[0, 0], b[:, 1]))
 
 
+@pytest.mark.parametrize("arm", ["tiago-arm", "kuka-kr210"])
+def test_one_poses_kinematics_are_the_batchs_to_the_bit(arm):
+    """One joint vector takes a shorter walk of the chain than a batch (the IK reference's steps and
+    solves call it thousands of times an episode): the same products in the same order, so the
+    same numbers to the bit, through a prismatic joint (TIAGo's torso) and fixed joints on the chain."""
+    from armreach_core.diagnostics.corpus import corpus_arm
+    from armreach_core.robot.placement import rotation
+
+    spec = corpus_arm(arm)
+    if spec.path is None:
+        pytest.skip(f"{arm} is not installed: {spec.install}")
+    robot = RobotModel(str(spec.path), **spec.options())
+    assert robot._serial
+    q = robot.sample_configurations(np.random.default_rng(5), 20)
+    position, jac = robot.position_and_jacobian(q)
+    transforms = robot.ee_transform(q)
+    for k in range(len(q)):
+        one_position, one_jac = robot.position_and_jacobian(q[k])
+        assert np.array_equal(one_position, position[k]) and np.array_equal(one_jac, jac[k])
+        assert np.array_equal(robot.ee_transform(q[k]), transforms[k])
+    axis = np.array([0.6, 0.0, 0.8])
+    angles = np.random.default_rng(6).uniform(-4, 4, 10)
+    batch = rotation(axis, angles)
+    assert all(np.array_equal(rotation(axis, angle), batch[k]) for k, angle in enumerate(angles))
+
+
 def test_position_and_jacobian_come_from_one_walk_to_the_bit(ar6_urdf):
     """An IK iteration takes both from one walk of the chain: the same numbers as the two calls."""
     robot = RobotModel(ar6_urdf)

@@ -204,6 +204,9 @@ class ArmKinematics:
         self.tree_joints: tuple[TreeJoint, ...] = tree_joints(self._tree, self.joint_names, self.held_joints)
         on_chain = set(chain)
         self._chain: tuple[TreeJoint, ...] = tuple(j for j in self.tree_joints if j.name in on_chain)
+        #: Whether each chain joint hangs from the link the one before it moves (the root for the first).
+        parents = [self.root_link, *(joint.child for joint in self._chain[:-1])]
+        self._serial = all(joint.parent == parent for joint, parent in zip(self._chain, parents, strict=True))
         #: links joined to the root by fixed joints only: they never move
         self.fixed_links: frozenset[str] = self._fixed_links(robot.joints)
 
@@ -320,6 +323,8 @@ class ArmKinematics:
 
         ``children``, when given, receives each actuated chain joint's child-link transform.
         """
+        if q.ndim == 1 and self._serial:
+            return self._frames_of_one(q, children)
         transform = np.broadcast_to(self.base_transform, (*q.shape[:-1], 4, 4))
         joint_frames: list[tuple[FloatArray, FloatArray, str]] = []
         for joint, frame, child in self._walk(q, self._chain):
@@ -329,6 +334,28 @@ class ArmKinematics:
             joint_frames.append((frame[..., :3, 3].copy(), frame[..., :3, :3] @ joint.axis, joint.kind))
             if children is not None:
                 children.append(child)
+        return transform, joint_frames
+
+    def _frames_of_one(
+        self, q: FloatArray, children: list[FloatArray] | None
+    ) -> tuple[FloatArray, list[tuple[FloatArray, FloatArray, str]]]:
+        """:meth:`_frames` for one joint vector on a chain whose joints each hang from the one before:
+        the same products in the same order (so to the last bit), without :meth:`_walk`'s batch
+        handling and its table of links (the IK reference and its solves call this at every step)."""
+        transform = self.base_transform
+        joint_frames: list[tuple[FloatArray, FloatArray, str]] = []
+        for joint in self._chain:
+            frame = transform @ joint.origin
+            if joint.kind == "fixed":
+                transform = frame
+                continue
+            value = q[joint.index] if joint.index >= 0 else np.zeros(())
+            transform = frame @ joint_motion(joint.kind, joint.axis, value)
+            if joint.index < 0:
+                continue
+            joint_frames.append((frame[:3, 3].copy(), frame[:3, :3] @ joint.axis, joint.kind))
+            if children is not None:
+                children.append(transform)
         return transform, joint_frames
 
     def link_transforms(self, q: npt.ArrayLike) -> dict[str, FloatArray]:
