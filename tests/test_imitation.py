@@ -122,6 +122,50 @@ def test_collection_on_two_workers_gives_the_serial_data_in_seed_order() -> None
     assert not np.array_equal(np.stack(serial.observations)[:5], np.stack(other.observations)[:5])
 
 
+def test_the_next_rounds_episodes_run_beside_the_judge_and_are_dropped_when_it_passes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A round's episodes need only the fitted actor: they start on the workers before the judge of
+    that fit runs, and a judge that passes drops them; the data are those of a run that waited."""
+    pytest.importorskip("stable_baselines3")
+    from stable_baselines3 import SAC
+
+    from armreach_core.rl import collection
+    from armreach_core.rl.imitation import imitate
+    from armreach_core.rl.validation import Validation
+
+    events: list[str] = []
+    start = collection.Collector.start
+
+    def recorded(self: collection.Collector, seeds: object, rollout: collection.Rollout) -> collection.Pending:
+        events.append(f"start {rollout.key[-1]}")
+        return start(self, seeds, rollout)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(collection.Collector, "start", recorded)
+    kwargs = {"task": "reach", "max_episode_steps": 40}
+    spec = {"episodes": 4, "rounds": 3, "rollouts": 3, "gradient_steps": 20, "beta": 0.5}
+    outcomes = {}
+
+    def judge() -> Validation:  # passes at its second call
+        judged = sum(event.startswith("judge") for event in events)
+        events.append(f"judge {judged}")
+        return Validation(10, 10, judged == 1, 0.0)
+
+    for workers in (2, 1):
+        events.clear()
+        env = ArmEnv(**kwargs)
+        model = SAC("MlpPolicy", env, policy_kwargs={"net_arch": [16]}, batch_size=16, seed=3, device="cpu")
+        outcomes[workers] = imitate(model, env.unwrapped, {**spec, "workers": workers}, 0, None, kwargs, judge)
+        env.close()
+        # the next round started before each judge (in this process it runs when its data are asked
+        # for); none after the judge that passed
+        assert events == ["start 0", "start 1", "judge 0", "start 2", "judge 1"]
+    stages = {workers: outcome["stages"] for workers, outcome in outcomes.items()}
+    assert len(stages[2]) == len(stages[1]) == 2
+    assert [s["states"] for s in stages[2]] == [s["states"] for s in stages[1]]
+    assert [s["loss"] for s in stages[2]] == [s["loss"] for s in stages[1]]
+
+
 def test_the_room_to_the_limits_is_each_joints_distance_to_them_in_actions() -> None:
     from armreach_core.rl.collection import limit_room
 

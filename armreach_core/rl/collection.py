@@ -14,6 +14,7 @@ from __future__ import annotations
 import concurrent.futures
 import io
 import multiprocessing
+import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -158,6 +159,11 @@ def run_seeds(env: Any, demonstrator: Any, seeds: Sequence[int], rollout: Rollou
     return data
 
 
+#: How far the workers' processes stand back (``os.nice``) from the process that started them: a
+#: round's episodes run while that process judges the previous fit, and the judge, which decides
+#: whether the round is needed at all, should not wait for them.
+WORKER_NICENESS = 5
+
 # One env and its controller per worker process, built once by its initializer.
 _WORKER: dict[str, Any] = {}
 
@@ -167,6 +173,8 @@ def _start_worker(env_kwargs: Mapping[str, Any]) -> None:
 
     from armreach_core.env import ArmEnv
 
+    if hasattr(os, "nice"):  # behind what the parent runs meanwhile (imitation's held-out judge)
+        os.nice(WORKER_NICENESS)
     th.set_num_threads(1)
     env: Any = ArmEnv(**env_kwargs).unwrapped
     _WORKER["env"], _WORKER["demonstrator"] = env, env.task.demonstrator(env)
@@ -213,8 +221,13 @@ class Collector:
 
     def run(self, seeds: Sequence[int], rollout: Rollout) -> Collected:
         """The episodes of ``seeds``, merged in seed order."""
+        return self.start(seeds, rollout).result()
+
+    def start(self, seeds: Sequence[int], rollout: Rollout) -> Pending:
+        """The episodes of ``seeds``, started on the workers and collected by :meth:`Pending.result`; with
+        one worker they run in this process when their result is asked for."""
         if self._pool is None:
-            return run_seeds(self.env, self.demonstrator, seeds, rollout)
+            return Pending(lambda: run_seeds(self.env, self.demonstrator, seeds, rollout))
         import torch as th
 
         policy: bytes | None = None
@@ -227,7 +240,30 @@ class Collector:
         futures = [
             self._pool.submit(_run_chunk, chunk, policy, rollout.beta, rollout.noise, rollout.key) for chunk in chunks
         ]
+        return Pending(futures=futures)
+
+
+class Pending:
+    """Episodes started by :meth:`Collector.start`: their data by :meth:`result`, or dropped by :meth:`cancel`."""
+
+    def __init__(
+        self,
+        run: Callable[[], Collected] | None = None,
+        futures: Sequence[concurrent.futures.Future[Collected]] = (),
+    ) -> None:
+        self._run, self._futures = run, list(futures)
+
+    def result(self) -> Collected:
+        """The episodes' data, merged in seed order (waiting for the workers)."""
+        if self._run is not None:
+            return self._run()
         merged = Collected()
-        for future in futures:
+        for future in self._futures:
             merged.extend(future.result())
         return merged
+
+    def cancel(self) -> None:
+        """Drop the episodes: the chunks not begun are not run; those under way end with their chunk."""
+        self._run = None
+        for future in self._futures:
+            future.cancel()

@@ -41,7 +41,10 @@ training episode holds, and a demonstration cut short never shows the end of its
 With the run's ``until_success`` (:mod:`armreach_core.rl.validation`), the actor is evaluated
 on held-out targets after every fit, a row of ``validation.csv`` each; at the first that
 passes, the rounds left and the reinforcement learning are skipped, as an evaluation during
-reinforcement learning would have stopped it.
+reinforcement learning would have stopped it. The next round's episodes need only the fitted
+actor, so they start on the workers before that evaluation and run beside it (the workers
+stand back for it, :data:`~armreach_core.rl.collection.WORKER_NICENESS`); when it passes they
+are dropped. A stage's ``seconds`` are its wait for its episodes and its fit.
 Implemented for the SB3 learner, whose actors are PyTorch modules.
 """
 
@@ -173,17 +176,22 @@ def imitate(
     threads = int(spec.get("fit_threads", 0))
     data = Dataset()
     stages: list[dict[str, Any]] = []
+
+    def stage_rollout(stage: int) -> tuple[range, Rollout]:
+        """The seeds of ``stage``'s episodes and how they run: the controller's (with noise), then DAgger's."""
+        if stage == 0:
+            first = DEMO_SEED + seed * 10_000
+            return range(first, first + episodes), Rollout(None, 1.0, noise, (seed, 0x1A17, 0))
+        first = ROLLOUT_SEED + seed * 100_000 + (stage - 1) * rollouts
+        return range(first, first + rollouts), Rollout(model.policy, beta**stage, 0.0, (seed, 0x1A17, stage))
+
     with Collector(env, demonstrator, env_kwargs, workers) as collector:
+        pending = collector.start(*stage_rollout(0))
         for stage in range(rounds + 1):
             t0 = time.perf_counter()
-            first = DEMO_SEED + seed * 10_000 if stage == 0 else ROLLOUT_SEED + seed * 100_000 + (stage - 1) * rollouts
-            count = episodes if stage == 0 else rollouts
-            share = 1.0 if stage == 0 else beta**stage
-            rollout = Rollout(
-                None if stage == 0 else model.policy, share, noise if stage == 0 else 0.0, (seed, 0x1A17, stage)
-            )
+            seeds, rollout = stage_rollout(stage)
             before = len(data)
-            collected = collector.run(range(first, first + count), rollout)
+            collected = pending.result()
             data.extend(collected)
             outcomes = collected.outcomes
             if stage == 0:
@@ -194,8 +202,8 @@ def imitate(
                 loss = fit(model, data, steps, batch, rate, seed + stage, **limits)
             record = {
                 "stage": "demonstrations" if stage == 0 else f"dagger {stage}",
-                "episodes": count,
-                "expert_share": share,
+                "episodes": len(seeds),
+                "expert_share": rollout.beta,
                 "states": len(data) - before,
                 "dataset": len(data),
                 "success_rate": float(np.mean([o["success"] for o in outcomes])),
@@ -203,6 +211,8 @@ def imitate(
                 "loss": loss,
                 "seconds": time.perf_counter() - t0,
             }
+            if stage < rounds:  # the next round needs only the fitted actor: its episodes run while the judge does
+                pending = collector.start(*stage_rollout(stage + 1))
             held = judge() if judge is not None else None
             if held is not None:
                 record["held_out"] = {
@@ -215,10 +225,11 @@ def imitate(
             if log is not None:
                 judged = "" if held is None else f", held-out {held.successes}/{held.episodes}"
                 log(
-                    f"imitation {record['stage']}: {count} episodes (expert share {share:.2f}), "
+                    f"imitation {record['stage']}: {len(seeds)} episodes (expert share {rollout.beta:.2f}), "
                     f"success {record['success_rate']:.0%}, touching {record['touch_rate']:.0%}, "
                     f"{len(data)} states, loss {loss:.4f}{judged}, {record['seconds']:.0f} s"
                 )
             if held is not None and held.passed:
+                pending.cancel()
                 break
     return {"stages": stages, "env_steps": len(data), "workers": workers}
