@@ -3,7 +3,8 @@
 - :mod:`.urdf`, :mod:`.checks`: reading a URDF safely (yourdfpy), with clear errors.
 - :mod:`.anatomy`, :mod:`.names`: which link is the end effector, which joints belong to a
   gripper; what names say, as hints.
-- :mod:`.kinematics`: the kinematic tree and its one forward-kinematics implementation.
+- :mod:`.kinematics`, :mod:`.walk`: the kinematic tree, and the one forward-kinematics
+  implementation that walks it.
 - :mod:`.model`: :class:`RobotModel`, the arm as one immutable value.
 - :mod:`.spec`, :mod:`.factory`: :class:`ArmSpec`, the frozen description of an arm, and
   the factory that builds (and caches) a model from it, choosing its home.

@@ -3,9 +3,9 @@
 :class:`ArmKinematics` is built from a parsed URDF (:mod:`armreach_core.robot.urdf`, i.e.
 yourdfpy) and a base placement, needs no physics engine, and never changes once built. Its
 forward kinematics (:meth:`ArmKinematics.link_transforms`, and the end-effector chain as
-the special case the hot paths use) is the one implementation in armreach: the home search,
-the statics and the parity oracle all go through it. :class:`~armreach_core.robot.model.RobotModel`
-adds the home pose.
+the special case the hot paths use, both walked by :mod:`armreach_core.robot.walk`) is the
+one implementation in armreach: the home search, the statics and the parity oracle all go
+through it. :class:`~armreach_core.robot.model.RobotModel` adds the home pose.
 
 The arm is the chain of joints from the root link to the end effector (by default the one
 :mod:`armreach_core.robot.anatomy` finds: never a finger). Movable joints off that chain, such as
@@ -37,23 +37,15 @@ from armreach_core.robot.joints import (
     tool_joint,
     tree_joints,
 )
-from armreach_core.robot.placement import cross, pose_matrix, rotation
+from armreach_core.robot.placement import cross, pose_matrix
 from armreach_core.robot.urdf import ParsedURDF
+from armreach_core.robot.walk import Frames, is_serial, joint_motion, serial_frames, walk
 
 FloatArray = npt.NDArray[np.float64]
 
 log = logging.getLogger("armreach.robot")
 
 __all__ = ["MOVABLE_TYPES", "ArmKinematics", "HeldJoint", "JointSpec", "Mimic", "TreeJoint", "joint_motion"]
-
-
-def joint_motion(kind: str, axis: FloatArray, value: FloatArray) -> FloatArray:
-    """The 4x4 motions of a joint of ``kind`` about (or along) unit ``axis`` by a batch of values."""
-    if kind == "prismatic":
-        out = np.broadcast_to(np.eye(4), (*np.shape(value), 4, 4)).copy()
-        out[..., :3, 3] = np.asarray(value)[..., None] * axis
-        return out
-    return rotation(axis, value)
 
 
 class ArmKinematics:
@@ -204,9 +196,7 @@ class ArmKinematics:
         self.tree_joints: tuple[TreeJoint, ...] = tree_joints(self._tree, self.joint_names, self.held_joints)
         on_chain = set(chain)
         self._chain: tuple[TreeJoint, ...] = tuple(j for j in self.tree_joints if j.name in on_chain)
-        #: Whether each chain joint hangs from the link the one before it moves (the root for the first).
-        parents = [self.root_link, *(joint.child for joint in self._chain[:-1])]
-        self._serial = all(joint.parent == parent for joint, parent in zip(self._chain, parents, strict=True))
+        self._serial = is_serial(self.root_link, self._chain)
         #: links joined to the root by fixed joints only: they never move
         self.fixed_links: frozenset[str] = self._fixed_links(robot.joints)
 
@@ -293,40 +283,18 @@ class ArmKinematics:
     def _walk(
         self, q: FloatArray, joints: tuple[TreeJoint, ...], held: FloatArray | None = None
     ) -> Iterator[tuple[TreeJoint, FloatArray, FloatArray]]:
-        """The one forward-kinematics implementation: per joint of ``joints`` (parents first,
-        each parent link reached by an earlier one or the root), its frame and its child
-        link's transform in the world, for joint vectors ``q`` (..., dof).
+        """:func:`~armreach_core.robot.walk.walk` from this arm's root link and base placement."""
+        return walk(self.root_link, self.base_transform, joints, q, held)
 
-        A held joint takes its value from ``held`` (..., n_held), zero without it.
-        """
-        batch = q.shape[:-1]
-        frames = {self.root_link: np.broadcast_to(self.base_transform, (*batch, 4, 4))}
-        for joint in joints:
-            frame = frames[joint.parent] @ joint.origin
-            if joint.kind == "fixed":
-                child = frame
-            else:
-                if joint.index >= 0:
-                    value = q[..., joint.index]
-                elif held is not None and joint.held >= 0:
-                    value = held[..., joint.held]
-                else:
-                    value = np.zeros(batch)
-                child = frame @ joint_motion(joint.kind, joint.axis, value)
-            frames[joint.child] = child
-            yield joint, frame, child
-
-    def _frames(
-        self, q: FloatArray, children: list[FloatArray] | None = None
-    ) -> tuple[FloatArray, list[tuple[FloatArray, FloatArray, str]]]:
+    def _frames(self, q: FloatArray, children: list[FloatArray] | None = None) -> tuple[FloatArray, Frames]:
         """World transform of the end-effector link and, per actuated chain joint, (origin, axis, kind).
 
         ``children``, when given, receives each actuated chain joint's child-link transform.
         """
         if q.ndim == 1 and self._serial:
-            return self._frames_of_one(q, children)
+            return serial_frames(self.base_transform, self._chain, q, children)
         transform = np.broadcast_to(self.base_transform, (*q.shape[:-1], 4, 4))
-        joint_frames: list[tuple[FloatArray, FloatArray, str]] = []
+        joint_frames: Frames = []
         for joint, frame, child in self._walk(q, self._chain):
             transform = child
             if joint.index < 0:
@@ -334,28 +302,6 @@ class ArmKinematics:
             joint_frames.append((frame[..., :3, 3].copy(), frame[..., :3, :3] @ joint.axis, joint.kind))
             if children is not None:
                 children.append(child)
-        return transform, joint_frames
-
-    def _frames_of_one(
-        self, q: FloatArray, children: list[FloatArray] | None
-    ) -> tuple[FloatArray, list[tuple[FloatArray, FloatArray, str]]]:
-        """:meth:`_frames` for one joint vector on a chain whose joints each hang from the one before:
-        the same products in the same order (so to the last bit), without :meth:`_walk`'s batch
-        handling and its table of links (the IK reference and its solves call this at every step)."""
-        transform = self.base_transform
-        joint_frames: list[tuple[FloatArray, FloatArray, str]] = []
-        for joint in self._chain:
-            frame = transform @ joint.origin
-            if joint.kind == "fixed":
-                transform = frame
-                continue
-            value = q[joint.index] if joint.index >= 0 else np.zeros(())
-            transform = frame @ joint_motion(joint.kind, joint.axis, value)
-            if joint.index < 0:
-                continue
-            joint_frames.append((frame[:3, 3].copy(), frame[:3, :3] @ joint.axis, joint.kind))
-            if children is not None:
-                children.append(transform)
         return transform, joint_frames
 
     def link_transforms(self, q: npt.ArrayLike) -> dict[str, FloatArray]:
