@@ -82,7 +82,7 @@ def action_scale(env: Any) -> npt.NDArray[np.float64] | None:
     if not env.task.moves_joints_by_action():
         return None
     scale = np.asarray(env.joint_step, dtype=np.float64) / float(env.max_joint_step)
-    return None if bool((scale >= 1.0).all()) else np.minimum(scale, 1.0)
+    return None if bool((scale >= 1.0).all()) else scale
 
 
 def episode(

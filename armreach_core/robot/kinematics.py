@@ -39,7 +39,7 @@ from armreach_core.robot.joints import (
 )
 from armreach_core.robot.placement import cross, pose_matrix
 from armreach_core.robot.urdf import ParsedURDF
-from armreach_core.robot.walk import Frames, is_serial, joint_motion, serial_frames, walk
+from armreach_core.robot.walk import Frames, joint_motion, serial_frames, walk
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -196,7 +196,6 @@ class ArmKinematics:
         self.tree_joints: tuple[TreeJoint, ...] = tree_joints(self._tree, self.joint_names, self.held_joints)
         on_chain = set(chain)
         self._chain: tuple[TreeJoint, ...] = tuple(j for j in self.tree_joints if j.name in on_chain)
-        self._serial = is_serial(self.root_link, self._chain)
         #: links joined to the root by fixed joints only: they never move
         self.fixed_links: frozenset[str] = self._fixed_links(robot.joints)
 
@@ -291,7 +290,7 @@ class ArmKinematics:
 
         ``children``, when given, receives each actuated chain joint's child-link transform.
         """
-        if q.ndim == 1 and self._serial:
+        if q.ndim == 1:  # the chain is the path from the root to the end effector: each joint hangs from the last
             return serial_frames(self.base_transform, self._chain, q, children)
         transform = np.broadcast_to(self.base_transform, (*q.shape[:-1], 4, 4))
         joint_frames: Frames = []

@@ -1,7 +1,7 @@
 """Walking a URDF's joint tree: each joint's frame and its child link's transform in the world.
 
 :func:`walk` is the one forward-kinematics implementation, for batches of joint vectors;
-:func:`serial_frames` is its special case for one joint vector on a serial chain, the hot path
+:func:`serial_frames` is its special case for one joint vector on the chain to a link, the hot path
 of the IK reference and its solves, with the same products in the same order (so the same
 numbers to the bit). :class:`~armreach_core.robot.kinematics.ArmKinematics` walks through them.
 """
@@ -61,16 +61,11 @@ def walk(
         yield joint, frame, child
 
 
-def is_serial(root_link: str, chain: tuple[TreeJoint, ...]) -> bool:
-    """Whether each joint of ``chain`` hangs from the link the one before it moves (the root for the first)."""
-    parents = [root_link, *(joint.child for joint in chain[:-1])]
-    return all(joint.parent == parent for joint, parent in zip(chain, parents, strict=True))
-
-
 def serial_frames(
     base_transform: FloatArray, chain: tuple[TreeJoint, ...], q: FloatArray, children: list[FloatArray] | None
 ) -> tuple[FloatArray, Frames]:
-    """For one joint vector ``q`` on a serial ``chain`` (:func:`is_serial`): the last link's world
+    """For one joint vector ``q`` on ``chain``, the path of joints from the root link down (each
+    hanging from the link the one before it moves): the last link's world
     transform and each actuated joint's frame, ``children`` receiving their child links'
     transforms; :func:`walk`'s products without its batch handling and its table of links.
     Joints the vector does not actuate stay at zero."""
