@@ -106,3 +106,47 @@ def test_a_policy_trained_on_scaled_observations_is_exported_for_si_ones(
     finally:
         scaled_env.close()
         si_env.close()
+
+
+CLONED = """
+description: a small clone of the IK reference, inputs standardized by its demonstrations
+reach:
+  sac:
+    timesteps: 0
+    learner: sb3
+    env: {max_episode_steps: 60}
+    policy: {net_arch: [32, 32]}
+    batch_size: 64
+    imitation: {episodes: 4, rounds: 0, gradient_steps: 200, workers: 1}
+"""
+
+
+def test_an_imitation_policy_is_exported_with_its_standardized_inputs(tmp_path: Path) -> None:
+    """An imitation run's actor divides its inputs by the demonstrations' spread (rl.standardize);
+    the export folds that into the first layer, or a robot would run another policy."""
+    from armreach_core.rl import runs
+    from armreach_core.rl.agents import env_kwargs
+    from armreach_core.rl.evaluate import load_agent
+    from armreach_core.rl.standardize import Standardize
+
+    preset = tmp_path / "cloned.yaml"
+    preset.write_text(CLONED)
+    run_dir, out = tmp_path / "run", tmp_path / "export"
+    assert main(["train", "--preset", str(preset), "--out", str(run_dir)]) == 0
+    assert main(["export", str(run_dir), "--out", str(out)]) == 0
+    config = runs.read_config(run_dir)
+    agent = load_agent(run_dir, config)
+    extractor = agent.model.actor.features_extractor  # type: ignore[attr-defined]
+    assert isinstance(extractor, Standardize) and float(extractor.std.max()) < 0.9  # not the identity
+    env = ArmEnv(**env_kwargs(config, evaluation=True))
+    engines = [e for e in ENGINES if e != "onnxruntime" or _has("onnxruntime")]
+    runtimes = [PolicyRuntime(out, engine=e) for e in engines]
+    try:
+        obs, _ = env.reset(seed=7)
+        for _ in range(30):
+            action = agent.act(obs, env)
+            for runtime in runtimes:
+                np.testing.assert_allclose(runtime.act(obs), action, atol=1e-5, rtol=0)
+            obs, *_ = env.step(action)
+    finally:
+        env.close()

@@ -82,13 +82,26 @@ def policy_layers(model: Any) -> tuple[list[Layer], str]:
         return _sbx_layers(model, algo)
     policy = model.policy
     if algo == "ppo":
-        return _torch_layers([*policy.mlp_extractor.policy_net, policy.action_net]), "clip"
+        layers = _torch_layers([*policy.mlp_extractor.policy_net, policy.action_net])
+        return _standardized(layers, policy.pi_features_extractor), "clip"
     if algo in ("td3", "ddpg"):
-        return _torch_layers(list(policy.actor.mu)), "tanh"
+        return _standardized(_torch_layers(list(policy.actor.mu)), policy.actor.features_extractor), "tanh"
     if algo == "sac":
         layers = _torch_layers([*policy.actor.latent_pi, policy.actor.mu])
-        return [*layers[:-1], Layer(layers[-1].weight, layers[-1].bias, "tanh")], "tanh"
+        layers = [*layers[:-1], Layer(layers[-1].weight, layers[-1].bias, "tanh")]
+        return _standardized(layers, policy.actor.features_extractor), "tanh"
     raise ConfigError(f"cannot export a {library_class(model).__name__} policy; exported are PPO, DDPG, TD3 and SAC")
+
+
+def _standardized(layers: list[Layer], extractor: Any) -> list[Layer]:
+    """``layers`` taking the raw observation: an imitation policy's :class:`Standardize` inputs
+    (``(x - mean) / std``, :mod:`armreach_core.rl.standardize`) folded into the first layer."""
+    from armreach_core.rl.standardize import Standardize
+
+    if not isinstance(extractor, Standardize):
+        return layers
+    mean, std = extractor.mean.detach().cpu().numpy(), extractor.std.detach().cpu().numpy()
+    return fold_scaling(layers, mean, std)
 
 
 def _sbx_layers(model: Any, algo: str) -> tuple[list[Layer], str]:
