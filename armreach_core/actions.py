@@ -1,5 +1,6 @@
 """What an env checks before it acts: the action (float64, clipped into [-1, 1], or an
-:class:`ActionError` that says why), and a display for a live window."""
+:class:`ActionError` that says why), and a display for a live window; and the room an action
+has before a joint target passes a limit, as a policy can read it off its observation."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import math
 import operator
 import os
 import sys
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -46,6 +48,65 @@ def within_limits(
     if all(map(operator.le, bounds[0], values)) and all(map(operator.le, values, bounds[1])):
         return target, False
     return np.minimum(np.maximum(target, lower), upper), True
+
+
+#: How far (rad or m) inside its limits a :class:`LimitRoom` keeps a joint's target: more than a
+#: float32 observation's rounding of an angle (1e-7 of it), so that a policy computing in float32
+#: never lands a hair past the limit the env checks in float64.
+ROOM_MARGIN = 1e-5
+#: Where a joint has no limit (continuous), the bound a :class:`LimitRoom` uses instead.
+NO_LIMIT = 1e6
+
+
+@dataclass(frozen=True)
+class LimitRoom:
+    """How far an action may move each joint before its target passes a limit, from the flat
+    observation alone: the angles are ``q = observation[start:stop] * scale + shift`` (the task's
+    scaling undone), and an action keeps every target inside ``[low, high]`` when each value lies
+    in ``[(low - q) / step, (high - q) / step]`` (the env's target is ``q + action * step``)."""
+
+    start: int
+    stop: int
+    shift: tuple[float, ...]
+    scale: tuple[float, ...]
+    low: tuple[float, ...]
+    high: tuple[float, ...]
+    step: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def clip(self, observation: npt.ArrayLike, action: npt.ArrayLike) -> npt.NDArray[np.float32]:
+        """``action`` (one or a batch) kept inside the room and [-1, 1], in float32."""
+        shift, scale, low, high = (
+            np.asarray(v, dtype=np.float32) for v in (self.shift, self.scale, self.low, self.high)
+        )
+        obs = np.asarray(observation, dtype=np.float32)
+        q = obs[..., self.start : self.stop] * scale + shift
+        step = np.float32(self.step)
+        guarded = np.minimum(np.maximum(np.asarray(action, dtype=np.float32), (low - q) / step), (high - q) / step)
+        clipped: npt.NDArray[np.float32] = np.clip(guarded, np.float32(-1.0), np.float32(1.0))
+        return clipped
+
+
+def limit_room(env: Any) -> LimitRoom | None:
+    """The :class:`LimitRoom` of an :class:`~armreach_core.env.ArmEnv`; None where its task maps actions
+    otherwise than ``q + action * max_joint_step`` or its observation does not hold the joint angles."""
+    task = env.task
+    where = task.observed_joints() if task.moves_joints_by_action() else None
+    if where is None:
+        return None
+    from armreach_core.robot.cartesian import target_bounds
+
+    robot = env.robot
+    low, high = target_bounds(robot)
+    margin = np.minimum(ROOM_MARGIN, (robot.upper - robot.lower) / 4)
+    low, high = np.clip(low + margin, -NO_LIMIT, NO_LIMIT), np.clip(high - margin, -NO_LIMIT, NO_LIMIT)
+    scaling = task.observation_scaling
+    shift = np.zeros(robot.dof) if scaling is None else scaling.shift[where]
+    scale = np.ones(robot.dof) if scaling is None else scaling.scale[where]
+    shift_t, scale_t, low_t, high_t = (tuple(float(v) for v in a) for a in (shift, scale, low, high))
+    return LimitRoom(where.start, where.stop, shift_t, scale_t, low_t, high_t, float(env.max_joint_step))
 
 
 def _converted(action: Any, shape: tuple[int, ...], meaning: str) -> npt.NDArray[np.float64]:

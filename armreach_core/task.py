@@ -217,6 +217,12 @@ class Task(ABC):
         (then the env computes it itself, and skips a velocity cap it cannot reach)."""
         return type(self).joint_targets is Task.joint_targets
 
+    def observed_joints(self) -> slice | None:
+        """Where the flat observation holds the joint angles (under :attr:`observation_scaling`), or
+        None where it does not: a policy that keeps its targets inside the limits reads them there
+        (:class:`~armreach_core.actions.LimitRoom`)."""
+        return None
+
     def setup_scene(self, scene: Scene) -> None:  # noqa: B027 - optional callback
         """Add markers or objects to the world (called once)."""
 

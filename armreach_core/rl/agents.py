@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.actions import LimitRoom
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
 from armreach_core.rl.config import RunConfig
@@ -40,6 +41,11 @@ OBSERVATION_SETTINGS = ("scaled_observation",)
 #: The arm itself (where it starts and sits, where its ROS packages are, its xacro arguments):
 #: kept by evaluation like the action's meaning.
 PLACEMENT_SETTINGS = tuple(key for key in ARM_KEYS if key not in ("urdf", "ee_link", "robot"))
+#: Why ``policy.limit_guard`` cannot be had.
+NO_ROOM = (
+    "policy.limit_guard: this env's actions are not joint steps read off a flat observation of the joint "
+    "angles (control 'ee', a goal-conditioned observation, or a task's own mapping); remove the key"
+)
 
 
 def env_kwargs(config: RunConfig, *, backend: str | None = None, evaluation: bool = False) -> dict[str, Any]:
@@ -128,9 +134,16 @@ def _fork_safe() -> bool:
 
 
 def build_model(
-    algo: str, settings: Mapping[str, Any], env: Any, seed: int, tb_dir: Path | None, device: str
+    algo: str,
+    settings: Mapping[str, Any],
+    env: Any,
+    seed: int,
+    tb_dir: Path | None,
+    device: str,
+    limit_room: LimitRoom | None = None,
 ) -> BaseAlgorithm:
-    """A fresh model for ``algo`` with ``settings`` (validated preset values), by the settings' learner."""
+    """A fresh model for ``algo`` with ``settings`` (validated preset values), by the settings' learner;
+    with ``policy.limit_guard``, its policy keeps inside ``limit_room`` (the env's :func:`limit_room`)."""
     from stable_baselines3 import HerReplayBuffer
     from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 
@@ -195,11 +208,19 @@ def build_model(
 
             kwargs["replay_buffer_class"] = NumpyReplayBuffer
         policy_name = "MultiInputPolicy" if her is not None else "MlpPolicy"
+    policy_class: Any = policy_name
+    if policy.get("limit_guard"):
+        if limit_room is None:
+            raise ConfigError(NO_ROOM)
+        from armreach_core.rl.limit_guard import guarded_policy
+
+        policy_class = guarded_policy(algo)
+        policy_kwargs["limit_room"] = limit_room.to_dict()
     with warnings.catch_warnings():
         # The paper's PPO batch (300) does not divide its rollout (2048); SB3 warns and
         # uses a short last mini-batch, which is what the paper's setting means.
         warnings.filterwarnings("ignore", message=".*mini-batch size.*", category=UserWarning)
-        model = cls(policy_name, env, **kwargs)
+        model = cls(policy_class, env, **kwargs)
     if settings.get("overlap"):  # acting while the learner updates (rl.overlap)
         model.use_overlap(str(policy.get("activation", "relu")))  # type: ignore[attr-defined]
     if tb_dir is None:  # SB3 would otherwise make an empty /tmp/SB3-<time> folder at every learn()

@@ -72,16 +72,19 @@ def clean_action(policy: Any, obs: Any) -> Any:
 
     For SAC (no gSDE) the tanh of the actor's mean, the mode ``policy._predict`` returns, without
     the log-std head and the distribution it also builds: the same values and gradients, bit for
-    bit; with Adam's ``foreach`` a fit takes a tenth less time. Other actors (TD3, DDPG) go
-    through ``_predict``.
+    bit; with Adam's ``foreach`` a fit takes a tenth less time. Other actors (TD3, DDPG; SAC with
+    gSDE) are called as ``_predict`` calls them. A policy's limit guard
+    (:mod:`armreach_core.rl.limit_guard`) is not applied: the fit sees the network's own action.
     """
     import torch as th
 
     actor = policy.actor
-    if hasattr(actor, "latent_pi") and not getattr(actor, "use_sde", False):
-        features = actor.extract_features(obs, actor.features_extractor)
-        return th.tanh(actor.mu(actor.latent_pi(features)))
-    return policy._predict(obs, deterministic=True)
+    if hasattr(actor, "latent_pi"):
+        if not getattr(actor, "use_sde", False):
+            features = actor.extract_features(obs, actor.features_extractor)
+            return th.tanh(actor.mu(actor.latent_pi(features)))
+        return actor(obs, deterministic=True)
+    return actor(obs)
 
 
 @contextlib.contextmanager

@@ -127,6 +127,11 @@ def check_settings(algo: str, learner: str, settings: Mapping[str, Any]) -> None
             f"overlap: only {', '.join(OVERLAPPING)} on learner 'sbx' act while they learn,"
             f" not {algo} on {learner!r}; remove the key"
         )
+    if settings.get("policy", {}).get("limit_guard") and (learner != "sb3" or algo not in ("sac", "td3", "ddpg")):
+        raise ConfigError(
+            f"policy.limit_guard: only the SAC, TD3 and DDPG policies of learner 'sb3' keep their targets inside"
+            f" the joint limits, not {algo} on {learner!r}; remove the key or use one of them"
+        )
     accepted = inspect.signature(algo_class(algo, learner).__init__).parameters
     for key in settings:
         if key in NOT_ARGUMENTS:

@@ -186,7 +186,11 @@ def _env_section(key: str, value: Any) -> dict[str, Any]:
     return out
 
 
-POLICY_SCHEMA: dict[str, Check] = {"net_arch": _int_list, "activation": _choice("relu", "tanh")}
+POLICY_SCHEMA: dict[str, Check] = {
+    "net_arch": _int_list,
+    "activation": _choice("relu", "tanh"),
+    "limit_guard": _bool,  # no action past a joint limit (rl.limit_guard)
+}
 NOISE_SCHEMA: dict[str, Check] = {
     "type": _choice("normal", "ornstein-uhlenbeck", "none"),
     "sigma": _num(float, 0.0),

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from armreach_core.errors import ConfigError
 from armreach_core.rl import runs, validation
-from armreach_core.rl.agents import build_model, make_vec_env
+from armreach_core.rl.agents import NO_ROOM, build_model, make_vec_env
 from armreach_core.rl.checkpoints import read_progress, save_checkpoint
 from armreach_core.rl.config import RunConfig
 from armreach_core.rl.learners import algo_class, configure_xla
@@ -30,6 +30,8 @@ from armreach_core.rl.validation import UntilSuccess, Validation
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
     from stable_baselines3.common.callbacks import BaseCallback
+
+    from armreach_core.actions import LimitRoom
 
 
 @dataclass(frozen=True)
@@ -160,20 +162,29 @@ def _imitate(
     return passed[0] if passed else None
 
 
-def _check_reference(config: RunConfig) -> None:
-    """Before any folder is made: the task has a reference controller for the demonstrations or imitation asked."""
+def _probe(config: RunConfig) -> LimitRoom | None:
+    """Before any folder is made: the task has a reference controller for the demonstrations or
+    imitation asked; and the env's :class:`LimitRoom`, where the policy keeps inside it
+    (``policy.limit_guard``)."""
     keys = [key for key in ("demonstrations", "imitation") if key in config.settings]
-    if not keys:
-        return
+    guarded = bool(config.settings.get("policy", {}).get("limit_guard"))
+    if not keys and not guarded:
+        return None
+    from armreach_core.actions import limit_room
     from armreach_core.env import ArmEnv
     from armreach_core.rl.agents import env_kwargs
     from armreach_core.rl.demonstrations import reference_controller
 
     env = ArmEnv(**env_kwargs(config))
     try:
-        reference_controller(env.unwrapped, keys[0])
+        if keys:
+            reference_controller(env.unwrapped, keys[0])
+        room = limit_room(env.unwrapped) if guarded else None
     finally:
         env.close()
+    if guarded and room is None:
+        raise ConfigError(NO_ROOM)
+    return room
 
 
 def _until_success(config: RunConfig, run_dir: Path, train_seconds: Any) -> StopOnSuccessCallback | None:
@@ -225,7 +236,7 @@ def train(
             raise ConfigError(f"{run_dir} has no {runs.CHECKPOINT} to resume from; start it again without --resume")
         runs.truncate_monitors(run_dir, progress.get("monitor_rows", {}))
     else:
-        _check_reference(config)
+        room = _probe(config)
         runs.new_run_dir(run_dir)
     configure_threads(config.torch_threads, config.device)
     call_start = time.perf_counter()
@@ -244,7 +255,8 @@ def train(
         if resume:
             model = _load_checkpoint(config, run_dir, env, trust)
         else:
-            model = build_model(config.algo, config.settings, env, config.seed, run_dir / "tb", config.device)
+            tb_dir = run_dir / "tb"
+            model = build_model(config.algo, config.settings, env, config.seed, tb_dir, config.device, room)
             env.seed(seed_base(config.seed))  # SB3 seeded the envs with the run seed itself; spread them
             if "demonstrations" in config.settings:
                 _demonstrate(config, model, run_dir)

@@ -24,6 +24,7 @@ from armreach_core.rl.evaluate import load_agent
 from armreach_core.sim2real.export import (
     CARD_FORMAT,
     CARD_VERSION,
+    exported_room,
     fold_scaling,
     observation_keys,
     policy_layers,
@@ -99,12 +100,22 @@ def export_run(run_dir: str | os.PathLike[str], out: str | os.PathLike[str], *, 
     agent = load_agent(run_path, config, trust=trust)
     assert isinstance(agent, SB3Agent)
     layers, bound = policy_layers(agent.model)
+    room = exported_room(agent.model)
     keys = observation_keys(agent.model.observation_space)
     kwargs = env_kwargs(dataclasses.replace(config), evaluation=False)
     kwargs.pop("max_episode_steps", None)
     env = ArmEnv(**kwargs)
     try:
         card = policy_card(env, config.algo, config.learner, keys, str(run_path))
+        if room is not None:
+            card["action"]["limit_guard"] = {
+                "meaning": (
+                    "each action value is clipped into [(lower - q) / max_joint_step, (upper - q) / max_joint_step] "
+                    "with q the observed joint angles, then into [-1, 1]: no target past a joint limit"
+                ),
+                "lower": list(room.low),
+                "upper": list(room.high),
+            }
         scaling = env.task.observation_scaling
         if scaling is not None:  # the card's observation is in SI units
             spaces: Any = getattr(env.observation_space, "spaces", {})
@@ -115,8 +126,8 @@ def export_run(run_dir: str | os.PathLike[str], out: str | os.PathLike[str], *, 
         env.close()
     folder.mkdir(parents=True, exist_ok=True)
     paths = [folder / "policy.onnx", folder / "policy.npz", folder / "card.json"]
-    write_onnx(layers, bound, int(card["observation"]["size"]), paths[0])
-    write_arrays(layers, bound, paths[1])
+    write_onnx(layers, bound, int(card["observation"]["size"]), paths[0], room)
+    write_arrays(layers, bound, paths[1], room)
     save_card(card, paths[2])
     return paths
 

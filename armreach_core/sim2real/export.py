@@ -6,7 +6,8 @@ whichever learner trained it (PPO: the action mean, clipped to [-1, 1]; DDPG, TD
 SAC: the actor, squashed by ``tanh``). :func:`export_run` writes into one folder
 
 * ``policy.onnx``: the network (``Gemm`` and activation nodes; input ``observation``
-  float32 ``(batch, size)``, output ``action``);
+  float32 ``(batch, size)``, output ``action``), and a policy's limit guard
+  (:mod:`armreach_core.rl.limit_guard`) as the last nodes;
 * ``policy.npz``: the same layers as arrays, for :mod:`armreach_core.sim2real.runtime`
   without onnxruntime;
 * ``card.json``: everything else a robot needs (see :func:`policy_card`).
@@ -23,6 +24,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.actions import LimitRoom
 from armreach_core.errors import ConfigError
 from armreach_core.rl.learners import learner_of, library_class
 
@@ -137,8 +139,49 @@ def observation_keys(space: Any) -> list[str] | None:
     return None if spaces is None else list(spaces)
 
 
-def write_onnx(layers: Sequence[Layer], bound: str, size: int, path: Path) -> None:
-    """``layers`` as an ONNX graph (opset 17); ``bound`` ``clip`` adds a Clip to [-1, 1]."""
+def exported_room(model: Any) -> LimitRoom | None:
+    """The limit guard of ``model``'s policy, if it has one, on the card's observation: the joint
+    angles read as they are (a task's scaling is folded into the first layer, not the guard)."""
+    from armreach_core.rl.limit_guard import guard_of
+
+    guard = guard_of(getattr(model, "policy", None))
+    if guard is None:
+        return None
+    size = guard.stop - guard.start
+    low, high = (tuple(float(v) for v in values.tolist()) for values in (guard.low, guard.high))
+    return LimitRoom(guard.start, guard.stop, (0.0,) * size, (1.0,) * size, low, high, guard.step)
+
+
+def _guard_nodes(room: LimitRoom, action: str) -> tuple[list[Any], list[Any]]:
+    """ONNX nodes (and initializers) that take ``action`` to the guarded ``action`` output."""
+    from onnx import helper, numpy_helper
+
+    inits = [
+        numpy_helper.from_array(np.array([room.start], np.int64), "guard_start"),
+        numpy_helper.from_array(np.array([room.stop], np.int64), "guard_stop"),
+        numpy_helper.from_array(np.array([1], np.int64), "guard_axis"),
+        numpy_helper.from_array(np.asarray(room.low, np.float32), "guard_low"),
+        numpy_helper.from_array(np.asarray(room.high, np.float32), "guard_high"),
+        numpy_helper.from_array(np.array(room.step, np.float32), "guard_step"),
+        numpy_helper.from_array(np.array(-1.0, np.float32), "guard_min"),
+        numpy_helper.from_array(np.array(1.0, np.float32), "guard_max"),
+    ]
+    nodes = [
+        helper.make_node("Slice", ["observation", "guard_start", "guard_stop", "guard_axis"], ["q"]),
+        helper.make_node("Sub", ["guard_low", "q"], ["below"]),
+        helper.make_node("Div", ["below", "guard_step"], ["room_low"]),
+        helper.make_node("Sub", ["guard_high", "q"], ["above"]),
+        helper.make_node("Div", ["above", "guard_step"], ["room_high"]),
+        helper.make_node("Max", [action, "room_low"], ["raised"]),
+        helper.make_node("Min", ["raised", "room_high"], ["kept"]),
+        helper.make_node("Clip", ["kept", "guard_min", "guard_max"], ["action"]),
+    ]
+    return nodes, inits
+
+
+def write_onnx(layers: Sequence[Layer], bound: str, size: int, path: Path, room: LimitRoom | None = None) -> None:
+    """``layers`` as an ONNX graph (opset 17); ``bound`` ``clip`` adds a Clip to [-1, 1]; ``room``
+    (:func:`exported_room`) the policy's limit guard."""
     try:
         import onnx
         from onnx import TensorProto, helper, numpy_helper
@@ -158,9 +201,14 @@ def write_onnx(layers: Sequence[Layer], bound: str, size: int, path: Path) -> No
             numpy_helper.from_array(np.array(-1.0, np.float32), "low"),
             numpy_helper.from_array(np.array(1.0, np.float32), "high"),
         ]
-        nodes.append(helper.make_node("Clip", [current, "low", "high"], ["action"]))
+        nodes.append(helper.make_node("Clip", [current, "low", "high"], ["bounded"]))
     else:
-        nodes.append(helper.make_node("Identity", [current], ["action"]))
+        nodes.append(helper.make_node("Identity", [current], ["bounded"]))
+    if room is None:
+        nodes.append(helper.make_node("Identity", ["bounded"], ["action"]))
+    else:
+        guard_nodes, guard_inits = _guard_nodes(room, "bounded")
+        nodes, inits = nodes + guard_nodes, inits + guard_inits
     actions = int(layers[-1].weight.shape[0])
     graph = helper.make_graph(
         nodes,
@@ -174,8 +222,12 @@ def write_onnx(layers: Sequence[Layer], bound: str, size: int, path: Path) -> No
     onnx.save(model, str(path))
 
 
-def write_arrays(layers: Sequence[Layer], bound: str, path: Path) -> None:
+def write_arrays(layers: Sequence[Layer], bound: str, path: Path, room: LimitRoom | None = None) -> None:
     arrays: dict[str, Any] = {"bound": np.array(bound), "activations": np.array([la.activation for la in layers])}
+    if room is not None:
+        arrays["guard_slice"] = np.array([room.start, room.stop], np.int64)
+        arrays["guard_low"], arrays["guard_high"] = np.asarray(room.low, np.float32), np.asarray(room.high, np.float32)
+        arrays["guard_step"] = np.array(room.step, np.float32)
     for i, layer in enumerate(layers):
         arrays[f"W{i}"], arrays[f"b{i}"] = layer.weight, layer.bias
     np.savez(path, **arrays)
@@ -189,6 +241,7 @@ __all__ = [
     "CARD_FORMAT",
     "CARD_VERSION",
     "Layer",
+    "exported_room",
     "observation_keys",
     "policy_layers",
     "save_card",

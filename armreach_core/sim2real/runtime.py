@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.actions import LimitRoom
 from armreach_core.errors import ConfigError
 
 #: Engines: ``numpy`` (always there) and ``onnxruntime`` (``pip install 'armreach[deploy]'``).
@@ -31,6 +32,16 @@ def _activation(name: str, x: npt.NDArray[np.float32]) -> npt.NDArray[np.float32
     if name == "identity":
         return x
     raise ConfigError(f"exported policy uses activation {name!r}, which this runtime does not know")
+
+
+def _room(data: Any) -> LimitRoom | None:
+    """The limit guard written into ``policy.npz``, if the policy has one."""
+    if "guard_slice" not in data:
+        return None
+    start, stop = (int(v) for v in data["guard_slice"])
+    low, high = (tuple(float(v) for v in data[key]) for key in ("guard_low", "guard_high"))
+    size = stop - start
+    return LimitRoom(start, stop, (0.0,) * size, (1.0,) * size, low, high, float(data["guard_step"]))
 
 
 class PolicyRuntime:
@@ -66,6 +77,7 @@ class PolicyRuntime:
                 activations = [str(a) for a in data["activations"]]
                 self._layers = [(data[f"W{i}"], data[f"b{i}"], act) for i, act in enumerate(activations)]
                 self._bound = str(data["bound"])
+                self._room = _room(data)
 
     def flat(self, observation: npt.ArrayLike | Mapping[str, npt.ArrayLike]) -> npt.NDArray[np.float32]:
         """The observation as the network's input, ``(batch, size)`` float32."""
@@ -94,6 +106,8 @@ class PolicyRuntime:
                 y = _activation(activation, y @ weight.T + bias)
             if self._bound == "clip":
                 y = np.clip(y, -1.0, 1.0)
+            if self._room is not None:
+                y = self._room.clip(x, y)
         return y[0] if single else y
 
 

@@ -194,6 +194,9 @@ class ReachTask(Task):
     def moves_joints_by_action(self) -> bool:
         return self.control == "joints" and type(self).joint_targets is ReachTask.joint_targets
 
+    def observed_joints(self) -> slice | None:
+        return None if self.goal_conditioned else self.layout.slices[JOINTS]
+
     def joint_targets(self, action: FloatArray, q: FloatArray, max_joint_step: float) -> FloatArray:
         if self.control == "joints":
             return super().joint_targets(action, q, max_joint_step)
