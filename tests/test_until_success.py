@@ -130,6 +130,53 @@ def test_an_episode_that_hovers_is_parked_and_run_on_only_when_it_decides(hover:
         assert sum(1 for n in plain_steps.values() if n == 120) >= 3
 
 
+class _Late(_Scripted):
+    """As :class:`_Scripted`, but the episodes in ``hover`` hold still for ``wait`` steps and then reach."""
+
+    def __init__(self, env: ArmEnv, hover: set[int], wait: int) -> None:
+        super().__init__(env, hover)
+        self.wait = wait
+
+    def step(self, action: Any) -> Any:
+        if self.seed in self.hover and self.steps[self.seed] >= self.wait:
+            self.steps[self.seed] += 1
+            return self.env.step(self.agent.act(None, self.env.unwrapped))
+        return super().step(action)
+
+
+def test_an_episode_running_past_presume_after_counts_as_failed_there() -> None:
+    """``presume_after``: the hovering episodes that decide a failure end at that step instead of at the
+    time limit, with the same outcome; an episode that would reach later counts as a failure."""
+    import dataclasses
+
+    spec = UntilSuccess(threshold=0.9, episodes=20, seed=0)  # two failures allowed
+    outcomes, steps = {}, {}
+    for presume in (0, 60):
+        envs = [_Scripted(ArmEnv(backend="pybullet", max_episode_steps=120), {1, 2, 4, 5}) for _ in range(9)]
+        try:
+            judged = dataclasses.replace(spec, presume_after=presume)
+            result = validate(lambda obs: np.zeros((len(obs), 6), np.float32), envs, judged, lanes=6, park_after=40)
+        finally:
+            for env in envs:
+                env.close()
+        outcomes[presume] = (result.episodes, result.successes, result.passed)
+        steps[presume] = {seed: n for env in envs for seed, n in env.steps.items()}
+    assert outcomes[60] == outcomes[0] and not outcomes[0][2]
+    assert [steps[0][seed] for seed in (1, 2, 4)] == [120] * 3  # run to the limit
+    assert [steps[60][seed] for seed in (1, 2, 4)] == [60] * 3  # presumed failed at 60 steps
+    # three episodes that hold still for 70 steps and then reach: successes under the paper's rule,
+    # presumed failures past 60 steps, and the third of them fails the evaluation
+    for presume, passed in ((0, True), (60, False)):
+        envs = [_Late(ArmEnv(backend="pybullet", max_episode_steps=200), {1, 2, 4}, 70) for _ in range(9)]
+        try:
+            judged = dataclasses.replace(spec, presume_after=presume)
+            result = validate(lambda obs: np.zeros((len(obs), 6), np.float32), envs, judged, lanes=6, park_after=40)
+        finally:
+            for env in envs:
+                env.close()
+        assert result.passed is passed, presume
+
+
 @pytest.mark.parametrize(
     ("section", "problem"),
     [({"threshold": 1.5}, "threshold"), ({"episodes": 0}, "episodes"), ({"often": 3}, "unknown key")],
