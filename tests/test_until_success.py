@@ -144,36 +144,34 @@ class _Late(_Scripted):
         return super().step(action)
 
 
+def _presumed(make: Callable[[], _Scripted], presume: int) -> tuple[Any, dict[int, int]]:
+    """An evaluation (two failures allowed) on nine of ``make``'s envs with ``presume_after``; each episode's steps."""
+    spec = UntilSuccess(threshold=0.9, episodes=20, seed=0, presume_after=presume)
+    envs = [make() for _ in range(9)]
+    try:
+        result = validate(lambda obs: np.zeros((len(obs), 6), np.float32), envs, spec, lanes=6, park_after=40)
+    finally:
+        for env in envs:
+            env.close()
+    return result, {seed: n for env in envs for seed, n in env.steps.items()}
+
+
 def test_an_episode_running_past_presume_after_counts_as_failed_there() -> None:
     """``presume_after``: the hovering episodes that decide a failure end at that step instead of at the
     time limit, with the same outcome; an episode that would reach later counts as a failure."""
-    import dataclasses
-
-    spec = UntilSuccess(threshold=0.9, episodes=20, seed=0)  # two failures allowed
     outcomes, steps = {}, {}
     for presume in (0, 60):
-        envs = [_Scripted(ArmEnv(backend="pybullet", max_episode_steps=120), {1, 2, 4, 5}) for _ in range(9)]
-        try:
-            judged = dataclasses.replace(spec, presume_after=presume)
-            result = validate(lambda obs: np.zeros((len(obs), 6), np.float32), envs, judged, lanes=6, park_after=40)
-        finally:
-            for env in envs:
-                env.close()
+        result, steps[presume] = _presumed(
+            lambda: _Scripted(ArmEnv(backend="pybullet", max_episode_steps=120), {1, 2, 4, 5}), presume
+        )
         outcomes[presume] = (result.episodes, result.successes, result.passed)
-        steps[presume] = {seed: n for env in envs for seed, n in env.steps.items()}
     assert outcomes[60] == outcomes[0] and not outcomes[0][2]
     assert [steps[0][seed] for seed in (1, 2, 4)] == [120] * 3  # run to the limit
     assert [steps[60][seed] for seed in (1, 2, 4)] == [60] * 3  # presumed failed at 60 steps
     # three episodes that hold still for 70 steps and then reach: successes under the paper's rule,
     # presumed failures past 60 steps, and the third of them fails the evaluation
     for presume, passed in ((0, True), (60, False)):
-        envs = [_Late(ArmEnv(backend="pybullet", max_episode_steps=200), {1, 2, 4}, 70) for _ in range(9)]
-        try:
-            judged = dataclasses.replace(spec, presume_after=presume)
-            result = validate(lambda obs: np.zeros((len(obs), 6), np.float32), envs, judged, lanes=6, park_after=40)
-        finally:
-            for env in envs:
-                env.close()
+        result, _ = _presumed(lambda: _Late(ArmEnv(backend="pybullet", max_episode_steps=200), {1, 2, 4}, 70), presume)
         assert result.passed is passed, presume
 
 
