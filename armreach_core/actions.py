@@ -73,6 +73,12 @@ class LimitRoom:
     high: tuple[float, ...]
     step: float
 
+    @classmethod
+    def unscaled(cls, start: int, stop: int, low: tuple[float, ...], high: tuple[float, ...], step: float) -> LimitRoom:
+        """The room of an observation that holds the joint angles as they are (in SI units)."""
+        size = stop - start
+        return cls(start, stop, (0.0,) * size, (1.0,) * size, low, high, step)
+
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 

@@ -57,6 +57,8 @@ ARGUMENT_OF = {
 }
 #: Algorithms that can act while they learn (``overlap``, on learner sbx; rl.overlap).
 OVERLAPPING = ("sac", "td3", "ddpg")
+#: Algorithms whose SB3 policy takes a limit guard (``policy.limit_guard``, :mod:`armreach_core.rl.limit_guard`).
+GUARDED = ("sac", "td3", "ddpg")
 #: Preset keys that are not constructor arguments at all.
 NOT_ARGUMENTS = (
     "timesteps",
@@ -127,7 +129,7 @@ def check_settings(algo: str, learner: str, settings: Mapping[str, Any]) -> None
             f"overlap: only {', '.join(OVERLAPPING)} on learner 'sbx' act while they learn,"
             f" not {algo} on {learner!r}; remove the key"
         )
-    if settings.get("policy", {}).get("limit_guard") and (learner != "sb3" or algo not in ("sac", "td3", "ddpg")):
+    if settings.get("policy", {}).get("limit_guard") and (learner != "sb3" or algo not in GUARDED):
         raise ConfigError(
             f"policy.limit_guard: only the SAC, TD3 and DDPG policies of learner 'sb3' keep their targets inside"
             f" the joint limits, not {algo} on {learner!r}; remove the key or use one of them"

@@ -26,9 +26,6 @@ import torch as th
 from stable_baselines3.sac.policies import SACPolicy
 from stable_baselines3.td3.policies import TD3Policy
 
-#: Algorithms whose SB3 policy takes the guard.
-GUARDED = ("sac", "td3", "ddpg")
-
 
 class LimitGuard(th.nn.Module):
     """``clip(clip(action, (low - q) / step, (high - q) / step), -1, 1)``, with
@@ -83,7 +80,7 @@ class GuardedTD3Policy(_Guarded, TD3Policy):
 
 
 def guarded_policy(algo: str) -> type[Any]:
-    """The guarded SB3 policy class of ``algo`` (one of :data:`GUARDED`)."""
+    """The guarded SB3 policy class of ``algo`` (one of :data:`~armreach_core.rl.learners.GUARDED`)."""
     return GuardedSACPolicy if algo == "sac" else GuardedTD3Policy
 
 
@@ -93,4 +90,4 @@ def guard_of(policy: Any) -> LimitGuard | None:
     return guard if isinstance(guard, LimitGuard) else None
 
 
-__all__ = ["GUARDED", "GuardedSACPolicy", "GuardedTD3Policy", "LimitGuard", "guard_of", "guarded_policy"]
+__all__ = ["GuardedSACPolicy", "GuardedTD3Policy", "LimitGuard", "guard_of", "guarded_policy"]

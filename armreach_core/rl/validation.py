@@ -171,17 +171,12 @@ def validate(
         for action, i in zip(actions, list(active), strict=True):
             obs[i], _, terminated, truncated, info = envs[i].step(action)
             elapsed[i] += 1
-            if terminated or truncated:
-                if info["is_success"]:
+            ended = terminated or truncated
+            if ended or (presume and elapsed[i] >= presume):  # one still running there: a failure
+                if ended and info["is_success"]:
                     successes += 1
                 else:
                     failures += 1
-                active.remove(i)
-                free.append(i)
-                if not resolving and failures <= allowed and successes < required:
-                    start()
-            elif presume and elapsed[i] >= presume:  # presumed to fail: dropped, as a failure
-                failures += 1
                 active.remove(i)
                 free.append(i)
                 if not resolving and failures <= allowed and successes < required:

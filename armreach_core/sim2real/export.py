@@ -147,9 +147,8 @@ def exported_room(model: Any) -> LimitRoom | None:
     guard = guard_of(getattr(model, "policy", None))
     if guard is None:
         return None
-    size = guard.stop - guard.start
     low, high = (tuple(float(v) for v in values.tolist()) for values in (guard.low, guard.high))
-    return LimitRoom(guard.start, guard.stop, (0.0,) * size, (1.0,) * size, low, high, guard.step)
+    return LimitRoom.unscaled(guard.start, guard.stop, low, high, guard.step)
 
 
 def _guard_nodes(room: LimitRoom, action: str) -> tuple[list[Any], list[Any]]:

@@ -40,8 +40,7 @@ def _room(data: Any) -> LimitRoom | None:
         return None
     start, stop = (int(v) for v in data["guard_slice"])
     low, high = (tuple(float(v) for v in data[key]) for key in ("guard_low", "guard_high"))
-    size = stop - start
-    return LimitRoom(start, stop, (0.0,) * size, (1.0,) * size, low, high, float(data["guard_step"]))
+    return LimitRoom.unscaled(start, stop, low, high, float(data["guard_step"]))
 
 
 class PolicyRuntime:
