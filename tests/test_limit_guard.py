@@ -112,6 +112,14 @@ def test_the_guard_needs_a_joint_step_policy_and_says_so_before_any_folder(tmp_p
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.training
+def test_the_training_throughput_bench_builds_a_guarded_policy() -> None:
+    from armreach_core.rl.throughput import bench_training
+
+    rate = bench_training("pybullet", "ddpg", 20, settings={"policy": {"limit_guard": True}})
+    assert rate > 0
+
+
 GUARDED_CLONE = """
 description: a small clone of the IK reference whose actions keep inside the joint limits
 reach:

@@ -27,17 +27,18 @@ def bench_training(
 
     from armreach_core.rl.agents import build_model, make_vec_env
     from armreach_core.rl.config import resolve_config
-    from armreach_core.rl.train import configure_threads
+    from armreach_core.rl.train import configure_threads, probe
 
     config = resolve_config(algo=algo, preset="paper", backend=backend, learner=learner)
     config = config.with_settings(**(settings or {}))
     if threads is not None:
         config = config.with_settings(torch_threads=threads)
     configure_threads(config.torch_threads, "cpu")
+    room = probe(config)  # the limit room, where the settings ask for a guarded policy
     with tempfile.TemporaryDirectory() as tmp:
         env = make_vec_env(config, Path(tmp), 0, 1, append=False)
         try:
-            model = build_model(algo, config.settings, env, 0, None, "cpu")
+            model = build_model(algo, config.settings, env, 0, None, "cpu", room)
             # Past the start: PPO's first rollout, an off-policy algorithm's first updates.
             warm = model.learning_starts + 50 if isinstance(model, OffPolicyAlgorithm) else 2048
             model.learn(warm)

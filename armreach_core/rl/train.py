@@ -162,7 +162,7 @@ def _imitate(
     return passed[0] if passed else None
 
 
-def _probe(config: RunConfig) -> LimitRoom | None:
+def probe(config: RunConfig) -> LimitRoom | None:
     """Before any folder is made: the task has a reference controller for the demonstrations or
     imitation asked; and the env's :class:`LimitRoom`, where the policy keeps inside it
     (``policy.limit_guard``)."""
@@ -236,7 +236,7 @@ def train(
             raise ConfigError(f"{run_dir} has no {runs.CHECKPOINT} to resume from; start it again without --resume")
         runs.truncate_monitors(run_dir, progress.get("monitor_rows", {}))
     else:
-        room = _probe(config)
+        room = probe(config)
         runs.new_run_dir(run_dir)
     configure_threads(config.torch_threads, config.device)
     call_start = time.perf_counter()
