@@ -12,6 +12,7 @@ from armreach_core.actions import limit_room
 from armreach_core.cli import main
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ConfigError
+from armreach_core.rl.presets import load_preset
 
 pytest.importorskip("stable_baselines3")
 
@@ -165,6 +166,27 @@ def test_an_exported_guarded_policy_keeps_its_guard(tmp_path: Path) -> None:
     assert np.all(expected[8:16] <= 0) and np.all(expected[16:] >= 0)
     for runtime in runtimes:
         np.testing.assert_allclose(runtime.act(batch), expected, atol=1e-5, rtol=0)
+
+
+@pytest.mark.training
+def test_an_auto_guard_guards_joint_steps_and_leaves_end_effector_control_unguarded(tmp_path: Path) -> None:
+    """``limit_guard: auto`` (the any-arm preset): the guard where the env's actions are joint steps,
+    none where they move the end effector (``--control ee``), which ``true`` refuses."""
+    from armreach_core.rl import runs
+    from armreach_core.rl.evaluate import load_agent
+    from armreach_core.rl.limit_guard import guard_of
+
+    preset = tmp_path / "auto.yaml"
+    preset.write_text(GUARDED_CLONE.replace("limit_guard: true", "limit_guard: auto"))
+    guards = {}
+    for control in ("joints", "ee"):
+        run_dir = tmp_path / control
+        assert main(["train", "--preset", str(preset), "--control", control, "--out", str(run_dir)]) == 0
+        model = load_agent(run_dir, runs.read_config(run_dir)).model  # type: ignore[attr-defined]
+        guards[control] = guard_of(model.policy)
+    assert guards["joints"] is not None and guards["ee"] is None
+    shipped = load_preset("any-arm")
+    assert all(shipped.get("reach", algo)["policy"]["limit_guard"] == "auto" for algo in shipped.algos("reach"))
 
 
 def _has(module: str) -> bool:

@@ -130,6 +130,7 @@ def test_paper_sbx_models_get_those_settings(monkeypatch: pytest.MonkeyPatch, tm
         ("reach:\n  ppo:\n    batch_size: 3.5\n", r"batch_size: expected int"),
         ("reach:\n  ppo:\n    env: {joint_limit_mode: wrap}\n", r"joint_limit_mode: must be one of"),
         ("reach:\n  ppo:\n    policy: {net_arch: []}\n", r"net_arch: expected a non-empty list"),
+        ("reach:\n  sac:\n    policy: {limit_guard: maybe}\n", r"limit_guard: expected true, false or auto"),
         ("reach:\n  a2c: {}\n", r"unknown algorithm"),
         ("reach:\n  ddpg:\n    noise: {type: pink}\n", r"noise\.type: must be one of"),
         ("reach: [1, 2]\n", r"must map algorithm names"),

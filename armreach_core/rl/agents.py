@@ -44,7 +44,8 @@ PLACEMENT_SETTINGS = tuple(key for key in ARM_KEYS if key not in ("urdf", "ee_li
 #: Why ``policy.limit_guard`` cannot be had.
 NO_ROOM = (
     "policy.limit_guard: this env's actions are not joint steps read off a flat observation of the joint "
-    "angles (control 'ee', a goal-conditioned observation, or a task's own mapping); remove the key"
+    "angles (control 'ee', a goal-conditioned observation, or a task's own mapping); remove the key, or set it to "
+    "auto to guard only where the env allows it"
 )
 
 
@@ -143,7 +144,8 @@ def build_model(
     limit_room: LimitRoom | None = None,
 ) -> BaseAlgorithm:
     """A fresh model for ``algo`` with ``settings`` (validated preset values), by the settings' learner;
-    with ``policy.limit_guard``, its policy keeps inside ``limit_room`` (the env's :func:`limit_room`)."""
+    with ``policy.limit_guard``, its policy keeps inside ``limit_room`` (the env's :func:`limit_room`;
+    with ``auto``, only where there is one)."""
     from stable_baselines3 import HerReplayBuffer
     from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 
@@ -209,9 +211,10 @@ def build_model(
             kwargs["replay_buffer_class"] = NumpyReplayBuffer
         policy_name = "MultiInputPolicy" if her is not None else "MlpPolicy"
     policy_class: Any = policy_name
-    if policy.get("limit_guard"):
-        if limit_room is None:
-            raise ConfigError(NO_ROOM)
+    guard = policy.get("limit_guard", False)  # true, false or auto (where the env has a room)
+    if guard is True and limit_room is None:
+        raise ConfigError(NO_ROOM)
+    if guard and limit_room is not None:
         from armreach_core.rl.limit_guard import guarded_policy
 
         policy_class = guarded_policy(algo)

@@ -70,6 +70,12 @@ def _bool(key: str, value: Any) -> bool:
     return value
 
 
+def _bool_or_auto(key: str, value: Any) -> bool | str:
+    if isinstance(value, bool) or value == "auto":
+        return "auto" if value == "auto" else bool(value)
+    raise ConfigError(f"{key}: expected true, false or auto, got {value!r}")
+
+
 def _int_list(key: str, value: Any) -> list[int]:
     if not isinstance(value, list) or not value or not all(isinstance(v, int) and v > 0 for v in value):
         raise ConfigError(f"{key}: expected a non-empty list of positive layer sizes, got {value!r}")
@@ -189,7 +195,7 @@ def _env_section(key: str, value: Any) -> dict[str, Any]:
 POLICY_SCHEMA: dict[str, Check] = {
     "net_arch": _int_list,
     "activation": _choice("relu", "tanh"),
-    "limit_guard": _bool,  # no action past a joint limit (rl.limit_guard)
+    "limit_guard": _bool_or_auto,  # no action past a joint limit (rl.limit_guard); auto: where the env allows
 }
 NOISE_SCHEMA: dict[str, Check] = {
     "type": _choice("normal", "ornstein-uhlenbeck", "none"),

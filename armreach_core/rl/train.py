@@ -165,9 +165,10 @@ def _imitate(
 def probe(config: RunConfig) -> LimitRoom | None:
     """Before any folder is made: the task has a reference controller for the demonstrations or
     imitation asked; and the env's :class:`LimitRoom`, where the policy keeps inside it
-    (``policy.limit_guard``)."""
+    (``policy.limit_guard``; with ``auto``, None where the env has no room)."""
     keys = [key for key in ("demonstrations", "imitation") if key in config.settings]
-    guarded = bool(config.settings.get("policy", {}).get("limit_guard"))
+    wanted = config.settings.get("policy", {}).get("limit_guard", False)
+    guarded = wanted is True or wanted == "auto"
     if not keys and not guarded:
         return None
     from armreach_core.actions import limit_room
@@ -182,7 +183,7 @@ def probe(config: RunConfig) -> LimitRoom | None:
         room = limit_room(env.unwrapped) if guarded else None
     finally:
         env.close()
-    if guarded and room is None:
+    if wanted is True and room is None:
         raise ConfigError(NO_ROOM)
     return room
 
