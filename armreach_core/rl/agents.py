@@ -134,6 +134,16 @@ def _fork_safe() -> bool:
     return "fork" in multiprocessing.get_all_start_methods() and "jax" not in sys.modules
 
 
+def guard_room(policy: Mapping[str, Any], room: LimitRoom | None) -> LimitRoom | None:
+    """The room a policy of these ``policy`` settings keeps inside: the env's ``room`` where
+    ``limit_guard`` is true, or auto and the env has one; None otherwise. True without a room is
+    a :class:`ConfigError`."""
+    guard = policy.get("limit_guard", False)
+    if guard is True and room is None:
+        raise ConfigError(NO_ROOM)
+    return room if guard else None
+
+
 def build_model(
     algo: str,
     settings: Mapping[str, Any],
@@ -211,14 +221,12 @@ def build_model(
             kwargs["replay_buffer_class"] = NumpyReplayBuffer
         policy_name = "MultiInputPolicy" if her is not None else "MlpPolicy"
     policy_class: Any = policy_name
-    guard = policy.get("limit_guard", False)  # true, false or auto (where the env has a room)
-    if guard is True and limit_room is None:
-        raise ConfigError(NO_ROOM)
-    if guard and limit_room is not None:
+    room = guard_room(policy, limit_room)
+    if room is not None:
         from armreach_core.rl.limit_guard import guarded_policy
 
         policy_class = guarded_policy(algo)
-        policy_kwargs["limit_room"] = limit_room.to_dict()
+        policy_kwargs["limit_room"] = room.to_dict()
     with warnings.catch_warnings():
         # The paper's PPO batch (300) does not divide its rollout (2048); SB3 warns and
         # uses a short last mini-batch, which is what the paper's setting means.

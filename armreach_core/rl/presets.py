@@ -72,7 +72,7 @@ def _bool(key: str, value: Any) -> bool:
 
 def _bool_or_auto(key: str, value: Any) -> bool | str:
     if isinstance(value, bool) or value == "auto":
-        return "auto" if value == "auto" else bool(value)
+        return value if isinstance(value, bool) else "auto"
     raise ConfigError(f"{key}: expected true, false or auto, got {value!r}")
 
 

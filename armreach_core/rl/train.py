@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from armreach_core.errors import ConfigError
 from armreach_core.rl import runs, validation
-from armreach_core.rl.agents import NO_ROOM, build_model, make_vec_env
+from armreach_core.rl.agents import build_model, guard_room, make_vec_env
 from armreach_core.rl.checkpoints import read_progress, save_checkpoint
 from armreach_core.rl.config import RunConfig
 from armreach_core.rl.learners import algo_class, configure_xla
@@ -167,8 +167,8 @@ def probe(config: RunConfig) -> LimitRoom | None:
     imitation asked; and the env's :class:`LimitRoom`, where the policy keeps inside it
     (``policy.limit_guard``; with ``auto``, None where the env has no room)."""
     keys = [key for key in ("demonstrations", "imitation") if key in config.settings]
-    wanted = config.settings.get("policy", {}).get("limit_guard", False)
-    guarded = wanted is True or wanted == "auto"
+    policy = config.settings.get("policy", {})
+    guarded = bool(policy.get("limit_guard"))
     if not keys and not guarded:
         return None
     from armreach_core.actions import limit_room
@@ -183,9 +183,7 @@ def probe(config: RunConfig) -> LimitRoom | None:
         room = limit_room(env.unwrapped) if guarded else None
     finally:
         env.close()
-    if wanted is True and room is None:
-        raise ConfigError(NO_ROOM)
-    return room
+    return guard_room(policy, room)
 
 
 def _until_success(config: RunConfig, run_dir: Path, train_seconds: Any) -> StopOnSuccessCallback | None:
