@@ -24,7 +24,7 @@ from armreach_core.errors import ConfigError
 from armreach_core.rl.agents import IKAgent
 from armreach_core.rl.presets import validate_settings
 from armreach_core.rl.timing import PARTS, read_timing
-from armreach_core.rl.validation import UntilSuccess, read_validations, validate
+from armreach_core.rl.validation import UntilSuccess, evaluation_envs, read_validations, validate
 
 
 def test_a_controller_that_reaches_passes_on_every_held_out_target() -> None:
@@ -176,8 +176,38 @@ def test_an_episode_running_past_presume_after_counts_as_failed_there() -> None:
 
 
 @pytest.mark.parametrize(
+    ("hover", "confirm", "passed"),
+    [({12, 15}, 0, True), ({12, 15}, 10, False), ({3, 12}, 10, True), ({3, 5}, 10, False)],
+)
+def test_a_pass_must_hold_on_a_second_look_at_the_next_targets(hover: set[int], confirm: int, passed: bool) -> None:
+    """``confirm``: a passing evaluation (one failure allowed in 10) is repeated on the next 10 targets
+    (seeds 10-19), which must pass too; a failing one is not repeated, and without it none is."""
+    spec = UntilSuccess(threshold=0.9, episodes=10, seed=0, confirm=confirm)
+    envs = [_Scripted(ArmEnv(backend="pybullet", max_episode_steps=60), hover) for _ in range(evaluation_envs(spec))]
+    try:
+        result = validate(lambda obs: np.zeros((len(obs), 6), np.float32), envs, spec, lanes=6, park_after=40)
+    finally:
+        for env in envs:
+            env.close()
+    seeds = {seed for env in envs for seed in env.steps}
+    assert result.passed is passed
+    first_passed = len(hover & set(range(10))) <= spec.allowed_failures
+    looked_again = confirm > 0 and first_passed
+    assert (max(seeds) >= 10) is looked_again  # the second look's targets follow the first's
+    if looked_again:  # the row counts both looks' episodes
+        assert result.episodes > 10 and result.successes >= 9
+    if passed:
+        assert result.episodes == 10 + confirm and result.successes >= 10 + confirm - 2
+
+
+@pytest.mark.parametrize(
     ("section", "problem"),
-    [({"threshold": 1.5}, "threshold"), ({"episodes": 0}, "episodes"), ({"often": 3}, "unknown key")],
+    [
+        ({"threshold": 1.5}, "threshold"),
+        ({"episodes": 0}, "episodes"),
+        ({"often": 3}, "unknown key"),
+        ({"confirm": -1}, "confirm"),
+    ],
 )
 def test_a_bad_until_success_section_is_refused_naming_the_key(section: dict[str, Any], problem: str) -> None:
     with pytest.raises(ConfigError, match=problem):

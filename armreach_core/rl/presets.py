@@ -228,6 +228,7 @@ UNTIL_SUCCESS_SCHEMA: dict[str, Check] = {
     "seed": _num(int, 0),
     "gate": _num(float, 0.0, 1.0),
     "presume_after": _num(int, 0),  # steps after which a running episode counts as failed (0: never)
+    "confirm": _num(int, 0),  # episodes of a second look on further targets after a pass (0: none)
     # evaluate in a worker process while training goes on (torch policies; else in the training process)
     "background": _bool,
 }
