@@ -137,11 +137,11 @@ def validate(
     park_after: int = PARK_AFTER,
 ) -> Validation:
     """Evaluate ``policy`` on ``spec``'s episodes (:func:`_look`); when that passes and ``spec.confirm``
-    asks for a second look, on as many further targets again, which must pass too.
+    asks for a second look, on that many further targets, which must pass too.
 
     A run stops at its first evaluation that passes, so of many evaluations on the same targets the
     one that stops it is the luckiest: a policy that reaches 96 % of all targets passes 388 of 400
-    about one time in six, and nine tries give it that chance nine times. The second look is an
+    about one time in five (binomial), and each of up to nine fits gets that chance. The second look is an
     independent sample that such a pass must repeat. Its episodes and successes are added to the
     first's, so the row's success rate covers both.
     """
