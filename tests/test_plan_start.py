@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import weakref
 from importlib import resources
 from pathlib import Path
 
@@ -12,9 +13,11 @@ import pytest
 from armreach_core import RobotModel
 from armreach_core.cli import main
 from armreach_core.diagnostics.corpus import corpus_arm
+from armreach_core.env import ArmEnv
 from armreach_core.rl import runs
+from armreach_core.robot import ik
 from armreach_core.robot.factory import build_robot
-from armreach_core.robot.ik import TOLERANCE, IKPolicy, middle_pose, plan_start, solve, solve_with_restarts
+from armreach_core.robot.ik import TOLERANCE, IKPolicy, middle_pose, path_taken, plan_start, solve, solve_with_restarts
 from armreach_core.tasks.reach.task import TEACHER_MARGIN
 
 
@@ -70,6 +73,35 @@ def test_the_franka_plans_from_the_middle_which_reaches_what_home_does_not() -> 
         _reached_from(robot, start, targets, bounds),
     )
     assert from_middle >= from_home + 4, (from_home, from_middle)  # measured 30 of 40 from home, 40 from the middle
+
+
+def test_the_jaco_plans_from_the_middle_a_small_lead_shown_over_rounds(monkeypatch) -> None:
+    """The Kinova Jaco's solves from home reach nearly every target, but where they do not, or the
+    plans refuse their path, its plans came from random starts. Counted as the plans count them, the
+    middle reaches more; the lead is small, so it takes more than one round of the survey to show."""
+    arm = corpus_arm("kinova-jaco")
+    if arm.path is None:
+        pytest.skip(f"kinova-jaco: `{arm.install}` first")
+    env = ArmEnv(urdf=str(arm.path), **arm.options())  # the reference's bounds: each joint's own step
+    robot, bounds = env.robot, IKPolicy.for_env(env, limit_margin=TEACHER_MARGIN)._bounds
+    env.close()
+    monkeypatch.setattr(ik, "SURVEY_ROUNDS", 1)
+    assert plan_start(robot, bounds, checked=True) is None  # one round of 64: 4 targets to none, not sure
+    monkeypatch.setattr(ik, "SURVEY_ROUNDS", 4)
+    monkeypatch.setattr(ik, "_PLAN_STARTS", weakref.WeakKeyDictionary())
+    start = plan_start(robot, bounds, checked=True)  # three rounds: 10 targets to none
+    assert start is not None
+    np.testing.assert_allclose(start, middle_pose(robot, bounds))
+    weak = False  # the Jaco's motors hold its home
+
+    def taken(from_: np.ndarray, target: np.ndarray) -> bool:
+        q, distance = solve(robot, target, q0=from_, bounds=bounds)
+        return distance < TOLERANCE and path_taken(robot, robot.home, q, weak=weak)
+
+    targets = _targets(robot, 256, seed=7)
+    only_home = sum(taken(robot.home, t) and not taken(start, t) for t in targets)
+    only_middle = sum(taken(start, t) and not taken(robot.home, t) for t in targets)
+    assert only_middle >= only_home + 8, (only_home, only_middle)  # measured 0 and 14
 
 
 def test_the_first_start_wins_when_its_solution_is_taken() -> None:
