@@ -15,7 +15,7 @@ from armreach_core.cli import main
 from armreach_core.diagnostics.corpus import corpus_arm
 from armreach_core.env import ArmEnv
 from armreach_core.rl import runs
-from armreach_core.robot import ik
+from armreach_core.robot import plan_start as plan_start_module
 from armreach_core.robot.factory import build_robot
 from armreach_core.robot.ik import TOLERANCE, IKPolicy, middle_pose, path_taken, plan_start, solve, solve_with_restarts
 from armreach_core.tasks.reach.task import TEACHER_MARGIN
@@ -85,10 +85,10 @@ def test_the_jaco_plans_from_the_middle_a_small_lead_shown_over_rounds(monkeypat
     env = ArmEnv(urdf=str(arm.path), **arm.options())  # the reference's bounds: each joint's own step
     robot, bounds = env.robot, IKPolicy.for_env(env, limit_margin=TEACHER_MARGIN)._bounds
     env.close()
-    monkeypatch.setattr(ik, "SURVEY_ROUNDS", 1)
+    monkeypatch.setattr(plan_start_module, "SURVEY_ROUNDS", 1)
     assert plan_start(robot, bounds, checked=True) is None  # one round of 64: 4 targets to none, not sure
-    monkeypatch.setattr(ik, "SURVEY_ROUNDS", 4)
-    monkeypatch.setattr(ik, "_PLAN_STARTS", weakref.WeakKeyDictionary())
+    monkeypatch.setattr(plan_start_module, "SURVEY_ROUNDS", 4)
+    monkeypatch.setattr(plan_start_module, "_PLAN_STARTS", weakref.WeakKeyDictionary())
     start = plan_start(robot, bounds, checked=True)  # three rounds: 10 targets to none
     assert start is not None
     np.testing.assert_allclose(start, middle_pose(robot, bounds))

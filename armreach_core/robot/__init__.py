@@ -10,7 +10,9 @@
   the factory that builds (and caches) a model from it, choosing its home.
 - :mod:`.geometry`, :mod:`.home`, :mod:`.statics`, :mod:`.workspace`: collision points,
   the home pose, gravity torques, where targets can be.
-- :mod:`.ik`, :mod:`.hulls`, :mod:`.placement`, :mod:`.bundled`: inverse kinematics,
+- :mod:`.solve`, :mod:`.plan_start`, :mod:`.ik`: inverse kinematics, where its plans start, and
+  the IK reference that plans with it.
+- :mod:`.hulls`, :mod:`.placement`, :mod:`.bundled`:
   convex collision hulls, base poses, the arms shipped in the wheel.
 
 Nothing here imports a physics engine.
