@@ -10,7 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.robot.model import FloatArray, RobotModel
-from armreach_core.robot.solve import TOLERANCE, solve
+from armreach_core.robot.solve import TOLERANCE, joint_weights, solve
 from armreach_core.robot.statics import holdable
 
 #: Poses checked along a planned joint-space line, ends included.
@@ -67,7 +67,7 @@ def plan_start(
     took 44 steps to a target instead of 20). ``weights`` go to :func:`~armreach_core.robot.solve.solve`.
     Computed once per robot, bounds, ``checked`` and ``weights``.
     """
-    w = np.ones(robot.dof) if weights is None else np.broadcast_to(np.asarray(weights, dtype=np.float64), (robot.dof,))
+    w = joint_weights(robot, weights)
     key = np.stack([*bounds, w]).tobytes() + bytes([checked])
     known = _PLAN_STARTS.setdefault(robot, {})
     if key in known:

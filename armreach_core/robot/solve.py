@@ -28,6 +28,18 @@ def _dls(jac: FloatArray, error: FloatArray, damping: float) -> FloatArray:
     return jac.T @ np.linalg.solve(jjt, error)
 
 
+def joint_weights(robot: RobotModel, weights: npt.ArrayLike | None) -> FloatArray:
+    """``weights`` as one per joint of ``robot`` (:func:`solve`'s), 1 for every joint when None."""
+    if weights is None:
+        return np.ones(robot.dof)
+    return np.broadcast_to(np.asarray(weights, dtype=np.float64), (robot.dof,))
+
+
+def _weighted_dls(jac: FloatArray, error: FloatArray, w: FloatArray | None) -> FloatArray:
+    """:func:`_dls` in the metric sum((dq_i / w_i)²); the plain step where ``w`` is None."""
+    return _dls(jac, error, DAMPING) if w is None else w * _dls(jac * w, error, DAMPING)
+
+
 def solve(
     robot: RobotModel,
     target: npt.ArrayLike,
@@ -52,16 +64,17 @@ def solve(
     q = robot.home.copy() if q0 is None else np.asarray(q0, dtype=np.float64).copy()
     goal = np.asarray(target, dtype=np.float64)
     low, high = (robot.lower, robot.upper) if bounds is None else bounds
-    w = np.ones(robot.dof) if weights is None else np.broadcast_to(np.asarray(weights, dtype=np.float64), (robot.dof,))
+    w = joint_weights(robot, weights)
+    uneven = None if bool(np.all(w == 1.0)) else w  # all 1: the plain step, without its products
     position, jac = robot.position_and_jacobian(q)  # one walk of the chain an iteration
     for _ in range(iterations):
         error = goal - position
-        dq = w * _dls(jac * w, error, DAMPING)
+        dq = _weighted_dls(jac, error, uneven)
         blocked = ((q <= low) & (dq < 0)) | ((q >= high) & (dq > 0))
         if blocked.any() and not blocked.all():  # those joints rest on a bound: the others do the step
             free = ~blocked
             dq = np.zeros_like(dq)
-            dq[free] = w[free] * _dls(jac[:, free] * w[free], error, DAMPING)
+            dq[free] = _weighted_dls(jac[:, free], error, None if uneven is None else uneven[free])
         norm = float(np.max(np.abs(dq)))
         if norm > max_step:
             dq *= max_step / norm
