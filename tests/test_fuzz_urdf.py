@@ -970,7 +970,9 @@ def _damage(draw: st.DrawFn, data: bytes, layout: str, kind: str | None = None) 
         return (text[:start] + "<sdf>" + text[start:] + "</sdf>").encode(), _refuse(
             "damage", "inside <sdf>", r"has root element <sdf>, expected <robot>; is it a URDF\?"
         )
-    return text.replace("<robot ", '<robot xmlns="http://example.com/robot" ', 1).encode(), _refuse(
+    # the root tag as written: ``<robot name=...>``, or a bare ``<robot>`` where a mutation took its name
+    namespaced = re.sub(r"<robot(?=[\s/>])", '<robot xmlns="http://example.com/robot"', text, count=1)
+    return namespaced.encode(), _refuse(
         "damage", "default namespace", r"in the XML namespace 'http://example.com/robot'.*remove the xmlns= attribute"
     )
 
