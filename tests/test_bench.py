@@ -10,6 +10,7 @@ import pytest
 
 from armreach_core import ArmReach6DOFEnv
 from armreach_core.cli import main
+from armreach_core.diagnostics.bench import interleaved_passes
 from armreach_core.plugins.lookup import load_backend_probes
 from tests.conftest import BACKENDS
 
@@ -57,16 +58,37 @@ def test_engine_timing_runs_the_physics_of_env_steps_and_counts_part_of_it(backe
     assert 0.0 < inside < whole
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_interleaved_passes_time_the_env_the_bare_loop_and_the_engine_over_the_same_episodes(backend: str) -> None:
+    """Each pass times every episode three ways, one after another: the env's steps cost the most,
+    the bare loop less, the engine's own calls (part of the bare loop) least; and the env is left
+    stepping as before."""
+    env = ArmReach6DOFEnv(backend=backend, max_episode_steps=50)
+    try:
+        passes = interleaved_passes(env, 600, 3)
+        assert len(passes) == 3 and all(one.bare is not None and one.engine is not None for one in passes)
+        # summed over the passes, so that a hiccup of the machine in one episode cannot turn the order
+        env_s, bare_s, engine_s = (sum(getattr(one, kind) for one in passes) for kind in ("env", "bare", "engine"))
+        assert env_s > bare_s > engine_s > 0.0
+        env.reset(seed=1)
+        _, _, _, _, info = env.step(np.zeros(6))
+        assert np.isfinite(info["distance"])
+    finally:
+        env.close()
+
+
 def test_bench_command_writes_json_and_table(tmp_path, capsys) -> None:
     out = tmp_path / "bench"
-    argv = ["bench", "--backends", "pybullet", "--steps", "50", "--repeats", "1", "--no-vector", "--sb3", "none"]
+    argv = ["bench", "--backends", "pybullet", "--steps", "500", "--repeats", "3", "--no-vector", "--sb3", "none"]
     assert main([*argv, "--out", str(out)]) == 0
     data = json.loads((out / "bench.json").read_text())
     (row,) = data["backends"]
     assert row["backend"] == "pybullet"
     for key in ("bare_steps_per_s", "env_steps_per_s", "reset_ms", "create_ms"):
         assert np.isfinite(row[key]) and row[key] > 0
-    assert row["step_over_bare"] == pytest.approx(row["bare_steps_per_s"] / row["env_steps_per_s"])
+    # an env step does the bare loop's work and more, and the bare loop the engine's calls and more: in
+    # every pass, so in the medians the ratios are
+    assert 1.0 < row["step_over_bare"] < row["step_over_engine"]
     assert row["vector_steps_per_s"] == {} and row["training_steps_per_s"] == {}
     table = (out / "bench.md").read_text()
     assert "| env step cost / bare loop cost (target ≤ 1.25) |" in table

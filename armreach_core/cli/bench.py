@@ -19,7 +19,12 @@ def add_parser(sub: Any) -> None:
     parser.add_argument(
         "--steps", type=int, default=None, help="timed steps per measurement (default: 5000; --corpus: 1000)"
     )
-    parser.add_argument("--repeats", type=int, default=5, help="repeats, taken in turns; the best is kept (default: 5)")
+    parser.add_argument(
+        "--repeats",
+        type=int,
+        default=5,
+        help="passes, taken in turns; steps/s: the best pass's, cost ratios: each pass's own, median (default: 5)",
+    )
     parser.add_argument(
         "--episode-steps",
         type=int,
