@@ -116,17 +116,22 @@ def bench_env_step(env: ArmEnv, steps: int, repeats: int) -> float:
 
     def run() -> float:
         env.reset(seed=0)
-        total = 0.0
-        t0 = time.perf_counter()
-        for action in actions:
-            _, _, terminated, truncated, _ = env.step(action)
-            if terminated or truncated:
-                total += time.perf_counter() - t0
-                env.reset()
-                t0 = time.perf_counter()
-        return total + time.perf_counter() - t0
+        return _stepping_seconds(env, actions)
 
     return steps / best_of(repeats, run)
+
+
+def _stepping_seconds(env: ArmEnv, actions: npt.NDArray[np.float32]) -> float:
+    """Seconds of ``env.step`` over ``actions``, an episode's end reset untimed."""
+    total = 0.0
+    t0 = time.perf_counter()
+    for action in actions:
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            total += time.perf_counter() - t0
+            env.reset()
+            t0 = time.perf_counter()
+    return total + time.perf_counter() - t0
 
 
 @dataclass(frozen=True)
@@ -137,20 +142,6 @@ class Pass:
     env: float
     bare: float | None
     engine: float | None
-
-
-def _env_episode_seconds(env: ArmEnv, actions: npt.NDArray[np.float32]) -> float:
-    """Seconds of ``env.step`` over ``actions`` from a reset (resets untimed)."""
-    env.reset()
-    total = 0.0
-    t0 = time.perf_counter()
-    for action in actions:
-        _, _, terminated, truncated, _ = env.step(action)
-        if terminated or truncated:
-            total += time.perf_counter() - t0
-            env.reset()
-            t0 = time.perf_counter()
-    return total + time.perf_counter() - t0
 
 
 def interleaved_passes(env: ArmEnv, steps: int, repeats: int) -> list[Pass]:
@@ -171,7 +162,8 @@ def interleaved_passes(env: ArmEnv, steps: int, repeats: int) -> list[Pass]:
         seconds: dict[str, float] = {"env": 0.0, "bare": 0.0, "engine": 0.0}
         for start in range(0, steps, length):
             episode = deltas[start : start + length]
-            seconds["env"] += _env_episode_seconds(env, actions[start : start + length])
+            env.reset()
+            seconds["env"] += _stepping_seconds(env, actions[start : start + length])
             if bare_loop is not None:
                 env.reset()
                 t0 = time.perf_counter()
