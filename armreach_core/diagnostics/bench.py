@@ -159,25 +159,21 @@ def interleaved_passes(env: ArmEnv, steps: int, repeats: int) -> list[Pass]:
     passes = []
     for _ in range(repeats):
         env.reset(seed=0)
-        seconds: dict[str, float] = {"env": 0.0, "bare": 0.0, "engine": 0.0}
+        stepped = bare = engine = 0.0
         for start in range(0, steps, length):
             episode = deltas[start : start + length]
             env.reset()
-            seconds["env"] += _stepping_seconds(env, actions[start : start + length])
+            stepped += _stepping_seconds(env, actions[start : start + length])
             if bare_loop is not None:
                 env.reset()
                 t0 = time.perf_counter()
                 bare_loop(env.backend, episode)
-                seconds["bare"] += time.perf_counter() - t0
+                bare += time.perf_counter() - t0
             if engine_seconds is not None:
                 env.reset()
-                seconds["engine"] += engine_seconds(env.backend, episode)
+                engine += engine_seconds(env.backend, episode)
         passes.append(
-            Pass(
-                seconds["env"],
-                seconds["bare"] if bare_loop is not None else None,
-                seconds["engine"] if engine_seconds is not None else None,
-            )
+            Pass(stepped, bare if bare_loop is not None else None, engine if engine_seconds is not None else None)
         )
     return passes
 
@@ -257,17 +253,19 @@ def run_bench(
         try:
             gc.collect()
             passes = interleaved_passes(env, steps, repeats)
-            result.env_steps_per_s = steps / min(p.env for p in passes)
-            bare = [p for p in passes if p.bare is not None]
-            if bare:
-                result.bare_steps_per_s = steps / min(p.bare for p in bare if p.bare is not None)
-                result.step_over_bare = float(np.median([p.env / p.bare for p in bare if p.bare]))
+            stepped = np.array([p.env for p in passes])
+            result.env_steps_per_s = steps / float(stepped.min())
+            # a backend offers each probe or not, so a measure is in every pass or in none
+            bare = np.array([p.bare for p in passes if p.bare is not None])
+            if bare.size:
+                result.bare_steps_per_s = steps / float(bare.min())
+                result.step_over_bare = float(np.median(stepped / bare))
             else:
                 log(f"{name}: backend {name!r} offers no bare loop for benchmarks")
-            engine = [p for p in passes if p.engine is not None]
-            if engine:
-                result.engine_steps_per_s = steps / min(p.engine for p in engine if p.engine is not None)
-                result.step_over_engine = float(np.median([p.env / p.engine for p in engine if p.engine]))
+            engine = np.array([p.engine for p in passes if p.engine is not None])
+            if engine.size:
+                result.engine_steps_per_s = steps / float(engine.min())
+                result.step_over_engine = float(np.median(stepped / engine))
             else:
                 log(f"{name}: backend {name!r} offers no engine timing for benchmarks")
             result.reset_ms = bench_reset(env, 200)
