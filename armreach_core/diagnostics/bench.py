@@ -178,6 +178,18 @@ def interleaved_passes(env: ArmEnv, steps: int, repeats: int) -> list[Pass]:
     return passes
 
 
+def _rate_and_ratio(
+    steps: int, stepped: npt.NDArray[np.float64], seconds: list[float | None]
+) -> tuple[float, float] | None:
+    """A measure's steps/s (its best pass) and the env step's cost over it (the median of the passes'
+    own ratios), from its ``seconds`` per pass beside the env's ``stepped``; None where the backend
+    offers no such probe (a probe is in every pass or in none)."""
+    times = np.array([t for t in seconds if t is not None])
+    if not times.size:
+        return None
+    return steps / float(times.min()), float(np.median(stepped / times))
+
+
 def bench_reset(env: ArmEnv, n: int) -> float:
     t0 = time.perf_counter()
     for i in range(n):
@@ -255,19 +267,16 @@ def run_bench(
             passes = interleaved_passes(env, steps, repeats)
             stepped = np.array([p.env for p in passes])
             result.env_steps_per_s = steps / float(stepped.min())
-            # a backend offers each probe or not, so a measure is in every pass or in none
-            bare = np.array([p.bare for p in passes if p.bare is not None])
-            if bare.size:
-                result.bare_steps_per_s = steps / float(bare.min())
-                result.step_over_bare = float(np.median(stepped / bare))
-            else:
+            bare = _rate_and_ratio(steps, stepped, [p.bare for p in passes])
+            if bare is None:
                 log(f"{name}: backend {name!r} offers no bare loop for benchmarks")
-            engine = np.array([p.engine for p in passes if p.engine is not None])
-            if engine.size:
-                result.engine_steps_per_s = steps / float(engine.min())
-                result.step_over_engine = float(np.median(stepped / engine))
             else:
+                result.bare_steps_per_s, result.step_over_bare = bare
+            engine = _rate_and_ratio(steps, stepped, [p.engine for p in passes])
+            if engine is None:
                 log(f"{name}: backend {name!r} offers no engine timing for benchmarks")
+            else:
+                result.engine_steps_per_s, result.step_over_engine = engine
             result.reset_ms = bench_reset(env, 200)
         finally:
             env.close()
