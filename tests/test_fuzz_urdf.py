@@ -15,14 +15,15 @@ values a small arm may have, spelled in every way the checks take; axes scaled; 
 parts deleted; a joint made another movable type or fixed; unknown elements and attributes;
 children reordered; comments and processing instructions; fixed links hung anywhere (up to
 the 128 links PyBullet serves); meshes inside the robot's folder; meshes outside it when the
-caller opts in; the text on one line, indented, in CRLF, UTF-16, Latin-1, with a BOM,
-without a declaration, padded with comments.
+caller opts in; inertias not positive semi-definite (repaired and reported); the text on one
+line, indented, in CRLF, UTF-16, Latin-1, with a BOM, without a declaration, padded with
+comments.
 
 Must be refused (:data:`REFUSED`, :data:`DAMAGES`): numbers that are no plain decimal,
 overflow a double, exceed the checks' bound, or come in the wrong count; negative, NaN or
-infinite masses; negative damping, friction and sizes; inertias not positive semi-definite
-(zero masses and singular inertias build: MuJoCo repairs them, see
-:mod:`armreach_core.robot.checks`); required parts deleted; unknown, floating or planar
+infinite masses; negative damping, friction and sizes (zero masses, singular inertias and
+inertias not positive semi-definite build: they are repaired, see
+:mod:`armreach_core.robot.inertia`); required parts deleted; unknown, floating or planar
 joint types, or a joint of the chain with no range; cycles, duplicates, dangling links,
 second parents, second roots; meshes or textures outside the robot's folder (without the
 opt-in); missing meshes; too many links; geometry with no, two or unknown shapes or a zero
@@ -513,8 +514,23 @@ def _mesh_inside(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
     return Change("mesh inside", f"mesh {filename!r} on {link.get('name')}")
 
 
+@st.composite
+def _not_psd(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
+    link = draw(st.sampled_from([link for link in root.findall("link") if link.find("inertial/inertia") is not None]))
+    kind = draw(st.sampled_from(["negative", "products", "negative product"]))
+    values = {
+        "negative": ["-1", "0", "0", "1", "0", "1"],
+        "products": ["1", "2", "2", "1", "2", "1"],
+        "negative product": ["0.01", "-0.5", "0", "0.01", "0", "0.01"],
+    }[kind]
+    inertia = link.find("inertial/inertia")
+    for key, value in zip(("ixx", "ixy", "ixz", "iyy", "iyz", "izz"), values, strict=True):
+        inertia.set(key, value)
+    return Change("inertia not positive semi-definite", f"{link.get('name')}: {kind}")  # repaired, and reported
+
+
 BUILD = [_sane_number, _sane_number, _axis, _delete_optional, _joint_type_ok, _unknown, _reorder, _comments,
-         _extra_links, _mesh_inside]  # fmt: skip
+         _extra_links, _mesh_inside, _not_psd]  # fmt: skip
 
 
 # -- must be refused -----------------------------------------------------------------------------
@@ -592,25 +608,6 @@ def _negative(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
     fix = "use 0 for none" if element.tag == "dynamics" else "lengths in metres, all positive"
     where = rf"{attribute}={_q(value)} of <{element.tag}>.*{_q(_owner(element))} must be >=? 0"
     return _refuse("negative", f"{root.getroottree().getpath(element)}@{attribute}={value!r}", where, fix)
-
-
-@st.composite
-def _not_psd(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
-    link = draw(st.sampled_from([link for link in root.findall("link") if link.find("inertial/inertia") is not None]))
-    kind = draw(st.sampled_from(["negative", "products", "negative product"]))
-    values = {
-        "negative": ["-1", "0", "0", "1", "0", "1"],
-        "products": ["1", "2", "2", "1", "2", "1"],
-        "negative product": ["0.01", "-0.5", "0", "0.01", "0", "0.01"],
-    }[kind]
-    inertia = link.find("inertial/inertia")
-    for key, value in zip(("ixx", "ixy", "ixz", "iyy", "iyz", "izz"), values, strict=True):
-        inertia.set(key, value)
-    name = link.get("name")
-    return _refuse(
-        "inertia not positive semi-definite", f"{name}: {kind}", rf"<inertia> of <inertial> of link {_q(name)}",
-        "not positive semi-definite", "fix the signs",
-    )  # fmt: skip
 
 
 #: Required parts of a link (XPath, attribute or None for the element) and what their absence is called.
@@ -867,7 +864,7 @@ def _joint_values(draw: st.DrawFn, root: etree._Element, at: Site) -> Change:
     return _refuse("joint values", kind, rf"<mimic> of joint {name} names the joint itself")
 
 
-REFUSED = [_not_a_decimal, _overflow, _beyond, _count, _bad_mass, _negative, _not_psd, _missing, _bad_joint_type,
+REFUSED = [_not_a_decimal, _overflow, _beyond, _count, _bad_mass, _negative, _missing, _bad_joint_type,
            _structure, _mesh_outside, _mesh_missing, _too_many_links, _geometry, _joint_values]  # fmt: skip
 
 

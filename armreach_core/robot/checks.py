@@ -11,10 +11,8 @@ element, the attribute and the fix:
 
 * numbers are plain decimals (``-1.5``, ``2e-3``), as many as the attribute needs,
   finite, and at most :data:`MAX_MAGNITUDE` in size (metres, kilograms, radians);
-* masses, inertias' principal moments, damping and friction are not negative, and an
-  inertia tensor is positive semi-definite (but on a placeholder link of at most a milligram,
-  which is repaired); geometry sizes are positive; a movable joint's
-  axis has a direction;
+* masses, damping and friction are not negative; geometry sizes are positive; a movable
+  joint's axis has a direction;
 * an ``<inertial>`` has both ``<mass>`` and ``<inertia>``; geometry has its sizes; a
   ``<dynamics>`` has damping or friction;
 * link and joint names are unique, joint types are URDF types that the engines simulate
@@ -22,8 +20,8 @@ element, the attribute and the fix:
   joint's ``<parent>`` and ``<child>`` name links of the URDF, a ``<mimic>`` names another
   joint of the URDF, and a URDF has at most :data:`MAX_LINKS` links.
 
-A zero mass, and an inertia that is positive semi-definite but no rigid body's (more compact
-than a steel ball of the link's mass, a point mass among them, wider than the whole robot, or
+A zero mass, and an inertia no rigid body has (not positive semi-definite, more compact than
+a steel ball of the link's mass, a point mass among them, wider than the whole robot, or
 breaking the triangle inequality), are accepted; the second kind is reported (a warning on
 ``armreach.robot``) and repaired once, the same way for both engines
 (:mod:`armreach_core.robot.inertia`). The tensor built from the six numbers is
@@ -41,11 +39,10 @@ import math
 import re
 from collections.abc import Iterable
 
-import numpy as np
 from lxml import etree
 
 from armreach_core.errors import URDFError
-from armreach_core.robot.inertia import INERTIA_KEYS, MASSLESS, inertia_tensor, is_inertia, repairs
+from armreach_core.robot.inertia import INERTIA_KEYS, repairs
 
 log = logging.getLogger("armreach.robot")
 
@@ -180,21 +177,9 @@ def _check_inertial(inertial: Element) -> None:
         missing = "<mass value=...>" if mass is None else "<inertia ixx=... izz=...>"
         raise URDFError(f"{_where(inertial)} has no {missing}; an <inertial> needs both <mass> and <inertia>")
     never_negative = "a mass is never negative: give the link's mass in kg"
-    weight = _numbers(mass, "value", 1, required=True, minimum=0.0, fix=never_negative)
-    values = {}
-    for key in INERTIA_KEYS:
-        number = _numbers(inertia, key, 1, required=True)
-        assert number is not None
-        values[key] = number[0]
-    tensor = inertia_tensor(values)
-    eigenvalues = np.linalg.eigvalsh(tensor)
-    assert weight is not None
-    if not is_inertia(eigenvalues) and weight[0] > MASSLESS:  # a placeholder's is repaired (robot.inertia)
-        raise URDFError(
-            f"<inertia> of {_where(inertial)} is not positive semi-definite (principal moments "
-            f"{', '.join(f'{e:.3g}' for e in eigenvalues)} kg·m²); a rigid body's moments are >= 0: "
-            "fix the signs of the products (ixy, ixz, iyz) or the diagonal"
-        )
+    _numbers(mass, "value", 1, required=True, minimum=0.0, fix=never_negative)
+    for key in INERTIA_KEYS:  # a tensor no body has is repaired, and reported (robot.inertia)
+        _numbers(inertia, key, 1, required=True)
 
 
 def _check_link(link: Element) -> None:

@@ -113,6 +113,11 @@ def _link_points(robot: ArmKinematics, enclosing: bool = False) -> dict[str, Flo
     return points
 
 
+def hull_points(robot: ArmKinematics, link: str) -> FloatArray | None:
+    """Points in ``link``'s frame whose convex hull holds its collision geometry (``None``: it has none)."""
+    return _link_points(robot, True).get(link)
+
+
 @functools.lru_cache(maxsize=32)
 def _geometry(robot: ArmKinematics) -> _Geometry:
     """The robot's links' collision points, which may touch the ground, and which may touch each other.

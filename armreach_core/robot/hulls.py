@@ -31,7 +31,8 @@ from typing import TYPE_CHECKING, Any
 
 from lxml import etree
 
-from armreach_core.robot.inertia import massless_frames, repair_inertials
+from armreach_core.robot.geometry import hull_points
+from armreach_core.robot.inertia import hull_inertia, massless_frames, repair_inertials
 
 if TYPE_CHECKING:
     from armreach_core.robot.model import RobotModel
@@ -144,6 +145,12 @@ def write_obj(mesh: Any, out: Path) -> Path:
     return out
 
 
+def _solid(robot: RobotModel, link: str) -> Any:
+    """``link``'s inertia per kilogram, its collision geometry's hull filled evenly (None: it has none)."""
+    points = hull_points(robot, link)
+    return None if points is None else hull_inertia(points)
+
+
 def simulation_urdf(robot: RobotModel, *, visuals: bool, max_vertices: int | None = MAX_HULL_VERTICES) -> bytes:
     """The robot's resolved URDF with collision meshes replaced by their hulls (of at most
     ``max_vertices`` vertices: :func:`convex_hull`) and, unless
@@ -153,7 +160,7 @@ def simulation_urdf(robot: RobotModel, *, visuals: bool, max_vertices: int | Non
     of links whose geometry is off the kinematics (``robot.uncollided_links``).
     :func:`armreach_core.robot.meshes.readable` then converts the meshes an engine cannot read."""
     root = etree.fromstring(robot.parsed.resolved_xml)
-    repair_inertials(root)
+    repair_inertials(root, lambda link: _solid(robot, link))
     massless_frames(root)
     for link in root.iter("link"):
         if link.get("name") in robot.uncollided_links:

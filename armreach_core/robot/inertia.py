@@ -19,8 +19,12 @@ engines load is repaired here:
   on a 0.4-0.8 m arm), is a placeholder: it gets the steel ball's inertia too.
 * **A placeholder's non-inertia.** A link of at most :data:`MASSLESS` (a milligram: a frame
   that Gazebo wanted to have a mass) whose tensor is not positive semi-definite (TIAGo's
-  antennas: 1 mg with a negative moment of 3.5e-8 kg·m²) gets the steel ball's inertia; on a
-  heavier link that is refused (:mod:`armreach_core.robot.checks`), as its moments matter.
+  antennas: 1 mg with a negative moment of 3.5e-8 kg·m²) gets the steel ball's inertia.
+* **A body's non-inertia.** A heavier link whose tensor is not positive semi-definite (every
+  link of compas_fab's ABB IRB 4600, 5-120 kg, has negative moments) gets the inertia of its
+  mass spread evenly through the convex hull of its collision geometry, about the hull's
+  centre, as MuJoCo's ``inertiafromgeom`` computes one (:func:`hull_inertia`); a link with no
+  collision geometry gets the steel ball's. Its mass and centre of mass stay the URDF's.
 * **Triangle inequality broken** (one principal moment larger than the other two
   together): every moment becomes their mean, as MuJoCo's ``balanceinertia`` does.
 
@@ -39,15 +43,20 @@ made a Kinova Gen3 lite's shoulder give way under a phantom 1 kg at its tool). A
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 #: Density (kg/m³) of the most compact material arms are built of: steel.
 DENSEST = 7850.0
 #: Links lighter than this (kg, a milligram) are frames, not bodies: their inertia is left alone.
 MASSLESS = 1e-6
+#: The least volume (m³, a cubic millimetre) a hull needs to give a link's inertia (:func:`hull_inertia`).
+MIN_VOLUME = 1e-9
+#: A link's :func:`hull_inertia` in its own frame, by its name (``None`` where it has no collision geometry).
+ShapeOf = Callable[[str], "np.ndarray[Any, Any] | None"]
 #: The six values of a URDF ``<inertia>``, in its order.
 INERTIA_KEYS = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 _PLACES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
@@ -70,18 +79,45 @@ def ball_moment(mass: float) -> float:
     return float(0.4 * mass * radius * radius)
 
 
+def hull_inertia(points: npt.ArrayLike) -> np.ndarray[Any, Any] | None:
+    """The inertia tensor per kilogram (m²) about its centre of a solid of even density filling the
+    convex hull of ``points`` (in the frame of the tensor); ``None`` for a hull with no volume."""
+    import trimesh
+
+    try:
+        hull = trimesh.convex.convex_hull(np.asarray(points, dtype=np.float64))
+        volume = float(hull.volume)
+    except Exception:  # fewer than four points, or all in a plane
+        return None
+    if not math.isfinite(volume) or volume <= MIN_VOLUME:
+        return None
+    per_kg: np.ndarray[Any, Any] = np.asarray(hull.moment_inertia, dtype=np.float64) / volume
+    return per_kg
+
+
 def repaired(
-    mass: float, tensor: np.ndarray[Any, Any], span: float = math.inf
+    mass: float,
+    tensor: np.ndarray[Any, Any],
+    span: float = math.inf,
+    shape: np.ndarray[Any, Any] | None = None,
 ) -> tuple[np.ndarray[Any, Any], str] | None:
     """The tensor an engine should get for a link of ``mass`` whose inertia is ``tensor``, on a
-    robot whose joint offsets add up to ``span`` m, and why; ``None`` when it is fine as it is."""
+    robot whose joint offsets add up to ``span`` m, and why; ``None`` when it is fine as it is.
+    ``shape`` is the link's :func:`hull_inertia` in the tensor's frame (``None``: no collision
+    geometry, or not looked at), used where ``tensor`` is no inertia at all."""
     moments = np.linalg.eigvalsh(tensor)
     floor = ball_moment(mass)
+    shown = ", ".join(f"{m:.3g}" for m in moments)
     if mass <= MASSLESS and not is_inertia(moments):
-        shown = ", ".join(f"{m:.3g}" for m in moments)
         return np.eye(3) * floor, f"a placeholder of {mass:.3g} kg with principal moments {shown}: given a steel ball's"
     if mass < MASSLESS:
         return None
+    if not is_inertia(moments):
+        why = (
+            f"principal moments {shown} kg·m², not positive semi-definite: given those of its {mass:.4g} kg spread "
+            "evenly through its collision geometry's convex hull, or a steel ball's where it has none"
+        )
+        return (floor * np.eye(3) if shape is None else mass * shape), why
     if float(moments.sum()) < 3.0 * floor:
         why = f"more compact than a steel ball of {mass:.4g} kg: given that ball's {floor:.3g} kg·m²"
         return np.eye(3) * floor, why
@@ -110,9 +146,11 @@ def joint_span(root: Any) -> float:
     return total
 
 
-def repairs(root: Any) -> list[tuple[Any, np.ndarray[Any, Any], str]]:
+def repairs(root: Any, shape_of: ShapeOf | None = None) -> list[tuple[Any, np.ndarray[Any, Any], str]]:
     """Every ``<inertial>`` of the URDF tree ``root`` that needs a repair: (its ``<inertia>``
-    element, the tensor it gets, why), in the order of the links."""
+    element, the tensor it gets, why), in the order of the links. ``shape_of(link)`` gives a
+    link's :func:`hull_inertia` in its own frame, asked only of links whose tensor is no inertia
+    (``None``: the steel ball for them, as where a link has no collision geometry)."""
     span = joint_span(root)
     found = []
     for link in root.iter("link"):
@@ -123,16 +161,34 @@ def repairs(root: Any) -> list[tuple[Any, np.ndarray[Any, Any], str]]:
         if mass_element is None or inertia is None:
             continue
         tensor = inertia_tensor({key: float(inertia.get(key, "0")) for key in INERTIA_KEYS})
-        fix = repaired(float(mass_element.get("value", "0")), tensor, span)
+        shape = None
+        if shape_of is not None and not is_inertia(np.linalg.eigvalsh(tensor)):
+            shape = _in_inertial_frame(shape_of(str(link.get("name"))), inertial)
+        fix = repaired(float(mass_element.get("value", "0")), tensor, span, shape)
         if fix is not None:
             found.append((inertia, fix[0], fix[1]))
     return found
 
 
-def repair_inertials(root: Any) -> int:
+def _in_inertial_frame(tensor: np.ndarray[Any, Any] | None, inertial: Any) -> np.ndarray[Any, Any] | None:
+    """A tensor given in the link's frame, turned into the frame of its ``<inertial>``'s origin."""
+    origin = inertial.find("origin")
+    if tensor is None or origin is None or not origin.get("rpy"):
+        return tensor
+    roll, pitch, yaw = (float(v) for v in origin.get("rpy").split())
+    (cr, sr), (cp, sp), (cy, sy) = ((math.cos(a), math.sin(a)) for a in (roll, pitch, yaw))
+    about_x = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    about_y = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    about_z = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    rotation = about_z @ about_y @ about_x  # the URDF's roll, pitch, yaw about the fixed axes
+    turned: np.ndarray[Any, Any] = rotation.T @ tensor @ rotation
+    return turned
+
+
+def repair_inertials(root: Any, shape_of: ShapeOf | None = None) -> int:
     """Repair, in place, every ``<inertial>`` of the URDF tree ``root`` that :func:`repairs`
     finds; the number repaired."""
-    found = repairs(root)
+    found = repairs(root, shape_of)
     for inertia, tensor, _ in found:
         for key, (i, j) in zip(INERTIA_KEYS, _PLACES, strict=True):
             inertia.set(key, repr(float(tensor[i, j])))
