@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import threading
 import time
 
@@ -13,6 +14,7 @@ import armreach_core
 from armreach_core import URDFError
 from armreach_core.robot.model import RobotModel
 from armreach_core.robot.urdf import MAX_LINE_BYTES, MAX_URDF_BYTES, read_urdf
+from tests.conftest import BACKENDS
 
 LINK = '<link name="{0}"><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>'
 JOINT = (
@@ -417,3 +419,34 @@ def test_another_tools_extensions_under_an_undeclared_prefix_are_dropped_with_a_
     path.write_text(marked.replace("</robot>", "<link name='x'></robot>"))
     with pytest.raises(URDFError, match="not well-formed XML"):
         read_urdf(path)
+
+
+def test_a_limit_that_leaves_out_a_bound_takes_0_for_it_as_urdf_says(tmp_path, ar6_urdf):
+    """URDF's ``lower`` and ``upper`` default to 0 (ROS, PyBullet and MuJoCo read them so): the rails
+    of compas_fab's RFL gantry give ``upper="37.206"`` alone. Such a joint was refused as rangeless;
+    its range is now what the engines read, and one with neither bound is still refused."""
+    text = ar6_urdf.read_text()
+
+    def without(text: str, joint: str, attribute: str) -> str:
+        start = text.index(f'<joint name="{joint}"')
+        end = text.index("</joint>", start)
+        return text[:start] + re.sub(rf' {attribute}="[^"]*"', "", text[start:end], count=1) + text[end:]
+
+    path = tmp_path / "bounds.urdf"
+    path.write_text(without(without(text, "wrist_3_joint", "lower"), "elbow_joint", "upper"))
+    robot = RobotModel(str(path))
+    ranges = dict(zip(robot.joint_names, zip(robot.lower.tolist(), robot.upper.tolist(), strict=True), strict=True))
+    assert ranges["wrist_3_joint"] == (0.0, 6.283185) and ranges["elbow_joint"] == (-3.141593, 0.0)
+    if "mujoco" in BACKENDS:
+        from armreach_core.env import ArmEnv
+
+        env = ArmEnv("reach", backend="mujoco", urdf=str(path))
+        try:
+            model = env.backend.model
+            for name, expected in (("wrist_3_joint", (0.0, 6.283185)), ("elbow_joint", (-3.141593, 0.0))):
+                assert tuple(model.joint(name).range) == pytest.approx(expected)  # MuJoCo's own reading
+        finally:
+            env.close()
+    path.write_text(without(path.read_text(), "wrist_3_joint", "upper"))
+    with pytest.raises(URDFError, match=r"revolute joint 'wrist_3_joint' has no <limit lower=\.\.\. upper=\.\.\.>"):
+        RobotModel(str(path))

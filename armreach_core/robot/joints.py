@@ -99,10 +99,9 @@ def joint_spec(joint: Any) -> JointSpec:
     if kind == "continuous":
         lower, upper = -CONTINUOUS_RANGE, CONTINUOUS_RANGE
     else:
-        if limit is None or limit.lower is None or limit.upper is None:
+        if limit is None or (limit.lower is None and limit.upper is None):
             raise URDFError(f"{kind} joint {name!r} has no <limit lower=... upper=...>; add the joint's range")
-        lower = finite(limit.lower, f"lower limit of joint {name!r}")
-        upper = finite(limit.upper, f"upper limit of joint {name!r}")
+        lower, upper = _bounds(limit, name)
         if not lower < upper:
             raise URDFError(
                 f"{kind} joint {name!r} has lower limit {lower} >= upper limit {upper}, so it cannot move; give it "
@@ -163,11 +162,18 @@ def held_joints(
 
 def held_limits(joint: Any) -> tuple[float, float]:
     limit = joint.limit
-    if str(joint.type) == "continuous" or limit is None or limit.lower is None or limit.upper is None:
+    if str(joint.type) == "continuous" or limit is None or (limit.lower is None and limit.upper is None):
         return -math.inf, math.inf
-    lower = finite(limit.lower, f"lower limit of joint {joint.name!r}")
-    upper = finite(limit.upper, f"upper limit of joint {joint.name!r}")
+    lower, upper = _bounds(limit, str(joint.name))
     return (lower, upper) if lower <= upper else (-math.inf, math.inf)
+
+
+def _bounds(limit: Any, name: str) -> tuple[float, float]:
+    """A ``<limit>``'s lower and upper bounds; one it leaves out is 0, as the URDF format says (a rail
+    of compas_fab's RFL gantry gives only ``upper="37.206"``: it runs from 0 to 37.206 m)."""
+    lower = 0.0 if limit.lower is None else finite(limit.lower, f"lower limit of joint {name!r}")
+    upper = 0.0 if limit.upper is None else finite(limit.upper, f"upper limit of joint {name!r}")
+    return lower, upper
 
 
 def resolve_mimic(robot_name: str, joints: dict[str, Any], name: str) -> Mimic | None:
