@@ -75,11 +75,10 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         base_orientation: the root link's orientation, a quaternion ``(w, x, y, z)``, default no rotation.
         package_dirs: where ROS packages live, ``{name: folder}``, for ``$(find NAME)`` and
             ``package://NAME/...`` (also ``ROS_PACKAGE_PATH``); their files may be read.
-        xacro_args: arguments of a xacro ``urdf``, ``{name: value}``.
-        allow_xacro_env: let a xacro ``urdf`` read environment variables (``$(env ...)``).
-        arm: the arm as one :class:`~armreach_core.robot.spec.ArmSpec`, instead of ``urdf``,
-            ``robot``, ``ee_link``, ``home``, ``tool_joints``, ``base_position``,
-            ``base_orientation`` and ``allow_external_meshes``.
+        xacro_args, allow_xacro_env: a xacro ``urdf``'s arguments, and whether it reads the environment.
+        frozen_joints: joints made fixed at a value, ``{name: rad or m}`` (a mobile base, a gantry's rails).
+        arm: the arm as one :class:`~armreach_core.robot.spec.ArmSpec`, instead of ``urdf``, ``robot``,
+            ``ee_link``, ``home``, ``tool_joints``, ``base_position``, ``base_orientation`` and the rest.
         physics: a physics profile (a YAML path or a :class:`~armreach_core.sim2real.profile.PhysicsProfile`,
             e.g. from ``armreach sysid``): its per-joint damping, friction and effort replace the URDF's, and its
             latency delays each joint target by that many control steps (the arm holds its reset pose until the
@@ -122,6 +121,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
         package_dirs: Mapping[str, str | os.PathLike[str]] | None = None,
         xacro_args: Mapping[str, Any] | None = None,
         allow_xacro_env: bool | None = None,
+        frozen_joints: Mapping[str, Any] | None = None,
         arm: ArmSpec | None = None,
         physics: str | os.PathLike[str] | PhysicsProfile | None = None,
         **task_options: Any,
@@ -154,6 +154,7 @@ class ArmEnv(gym.Env[Any, npt.NDArray[np.float32]]):
             package_dirs=package_dirs,
             xacro_args=xacro_args,
             allow_xacro_env=allow_xacro_env,
+            frozen_joints=frozen_joints,
         )
         if arm is not None:
             if given != ArmSpec():

@@ -32,7 +32,7 @@ def check_backends(names: Sequence[str] | None) -> None:
 
 def check_urdf(urdf: str | Path | None, description: Mapping[str, Any] | None = None) -> None:
     """The file is a URDF (or xacro) armreach reads: it exists, is XML, is a ``<robot>``, its meshes are
-    in reach; ``description``: the env's ``package_dirs``, ``xacro_args`` and ``allow_xacro_env``."""
+    in reach; ``description``: the env's ``package_dirs``, ``xacro_args``, ``allow_xacro_env`` and ``frozen_joints``."""
     if urdf is not None:
         from armreach_core.robot.spec import ArmSpec
         from armreach_core.robot.urdf import read_urdf
@@ -43,6 +43,7 @@ def check_urdf(urdf: str | Path | None, description: Mapping[str, Any] | None = 
             package_dirs=dict(spec.package_dirs or ()),
             xacro_args=dict(spec.xacro_args or ()),
             allow_xacro_env=bool(spec.allow_xacro_env),
+            frozen_joints={name: float(value) for name, value in spec.frozen_joints or ()},
         )
 
 

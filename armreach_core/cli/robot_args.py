@@ -11,12 +11,12 @@ from armreach_core.robot.spec import ArmSpec
 #: The robot flags' keys (argparse destinations), the env keyword argument of each.
 ROBOT_FLAGS = ("urdf", "ee_link", "home", "base_position", "base_orientation")
 #: The description flags' keys: how a xacro is expanded and where its packages are.
-DESCRIPTION_FLAGS = ("package_dirs", "xacro_args", "allow_xacro_env")
+DESCRIPTION_FLAGS = ("package_dirs", "xacro_args", "allow_xacro_env", "frozen_joints")
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser, *, urdf: bool = True, of_run: bool = False) -> None:
     """``--urdf``, ``--ee-link``, ``--home``, ``--base-position``, ``--base-orientation``, and
-    ``--package-dir``, ``--xacro-arg`` and ``--allow-xacro-env`` for the description.
+    ``--package-dir``, ``--xacro-arg``, ``--allow-xacro-env`` and ``--freeze-joint`` for the description.
 
     ``of_run``: the flags override a run's arm (``evaluate``), so each defaults to the run's.
     """
@@ -74,6 +74,15 @@ def add_robot_arguments(parser: argparse.ArgumentParser, *, urdf: bool = True, o
         default=None,
         help="let a xacro --urdf read environment variables ($(env ...), $(optenv ...))",
     )
+    parser.add_argument(
+        "--freeze-joint",
+        dest="frozen_joints",
+        action="append",
+        default=None,
+        metavar="NAME=VALUE",
+        help="make joint NAME fixed at VALUE (rad, or m along a prismatic joint), so the arm starts "
+        "below it: a mobile base given as joints, a gantry's rails, a humanoid's legs (repeatable)",
+    )
 
 
 def _pairs(values: list[str] | None, separator: str, flag: str, what: str) -> dict[str, str] | None:
@@ -100,6 +109,9 @@ def description_kwargs(args: argparse.Namespace) -> dict[str, Any]:
         out["xacro_args"] = xacro
     if getattr(args, "allow_xacro_env", None):
         out["allow_xacro_env"] = True
+    frozen = _pairs(getattr(args, "frozen_joints", None), "=", "--freeze-joint", "VALUE")
+    if frozen is not None:
+        out["frozen_joints"] = frozen
     return out
 
 
@@ -152,6 +164,8 @@ def arm_flags(spec: ArmSpec) -> list[str]:
         flags += ["--xacro-arg", f"{name}:={value}"]
     if spec.allow_xacro_env:
         flags.append("--allow-xacro-env")
+    for name, value in spec.frozen_joints or ():
+        flags += ["--freeze-joint", f"{name}={value}"]
     return flags
 
 

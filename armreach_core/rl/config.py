@@ -182,6 +182,7 @@ class RunConfig:
             package_dirs=env.get("package_dirs"),
             xacro_args=env.get("xacro_args"),
             allow_xacro_env=env.get("allow_xacro_env"),
+            frozen_joints=env.get("frozen_joints"),
         )
 
     def with_settings(self, **changes: Any) -> RunConfig:
@@ -267,7 +268,7 @@ def resolve_config(
     needs. PPO's total is rounded up to whole rollouts (``n_steps × n_envs``), which is
     what SB3 trains, so the recorded count is the true one. ``placement`` (``home``,
     ``base_position``, ``base_orientation``, and the description's ``package_dirs``,
-    ``xacro_args``, ``allow_xacro_env``) overrides the preset's ``env`` block.
+    ``xacro_args``, ``allow_xacro_env``, ``frozen_joints``) overrides the preset's ``env`` block.
     """
     loaded = load_preset(preset)
     settings = loaded.get(task, algo)

@@ -150,6 +150,7 @@ ENV_SCHEMA: dict[str, Check] = {
     "package_dirs": _names_to_strings,
     "xacro_args": _names_to_strings,
     "allow_xacro_env": _bool,
+    "frozen_joints": _names_to_strings,  # joints made fixed at a value (docs/your-arm.md)
     # a perturbation drawn per training episode (domain randomization)
     "randomize": _randomize,
     # a fitted physics profile (armreach sysid): the dynamics and latency trained on

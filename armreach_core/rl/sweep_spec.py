@@ -39,10 +39,11 @@ __all__ = [
 SPEC_KEYS = ("name", "algos", "seeds", "arms", "backends", "preset", "task", "steps", "episodes", "overrides", "cpus")
 #: Keys an arm entry of a spec may have (the ARM FLAGS of ``armreach train``).
 SWEEP_ARM_KEYS = (
-    "urdf", "ee_link", "home", "base_position", "base_orientation", "package_dirs", "xacro_args", "allow_xacro_env"
+    "urdf", "ee_link", "home", "base_position", "base_orientation", "package_dirs", "xacro_args", "allow_xacro_env",
+    "frozen_joints",
 )  # fmt: skip
 #: The arm keys that describe how its description is read (a xacro's arguments, where its packages are).
-_DESCRIPTION = ("package_dirs", "xacro_args", "allow_xacro_env")
+_DESCRIPTION = ("package_dirs", "xacro_args", "allow_xacro_env", "frozen_joints")
 #: The arm entries whose values are vectors of numbers.
 _VECTORS = ("home", "base_position", "base_orientation")
 
@@ -113,6 +114,7 @@ def resolve_arm_urdf(
         package_dirs=dict(spec.package_dirs or ()),
         xacro_args=dict(spec.xacro_args or ()),
         allow_xacro_env=bool(spec.allow_xacro_env),
+        frozen_joints={name: float(value) for name, value in spec.frozen_joints or ()},
     )
     return path.stem, str(path.resolve()), {}
 

@@ -32,6 +32,7 @@ def _build(spec: ArmSpec, mtime: float, ros_package_path: str) -> RobotModel:
         package_dirs=dict(spec.package_dirs or ()),
         xacro_args=dict(spec.xacro_args or ()),
         allow_xacro_env=bool(spec.allow_xacro_env),
+        frozen_joints={name: float(value) for name, value in spec.frozen_joints or ()},
     )
 
 

@@ -49,6 +49,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.robot.rotations import origin_matrix
+
 #: Density (kg/m³) of the most compact material arms are built of: steel.
 DENSEST = 7850.0
 #: Links lighter than this (kg, a milligram) are frames, not bodies: their inertia is left alone.
@@ -175,12 +177,7 @@ def _in_inertial_frame(tensor: np.ndarray[Any, Any] | None, inertial: Any) -> np
     origin = inertial.find("origin")
     if tensor is None or origin is None or not origin.get("rpy"):
         return tensor
-    roll, pitch, yaw = (float(v) for v in origin.get("rpy").split())
-    (cr, sr), (cp, sp), (cy, sy) = ((math.cos(a), math.sin(a)) for a in (roll, pitch, yaw))
-    about_x = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
-    about_y = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
-    about_z = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
-    rotation = about_z @ about_y @ about_x  # the URDF's roll, pitch, yaw about the fixed axes
+    rotation = origin_matrix(origin)[:3, :3]
     turned: np.ndarray[Any, Any] = rotation.T @ tensor @ rotation
     return turned
 

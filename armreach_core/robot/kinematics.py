@@ -181,7 +181,11 @@ class ArmKinematics:
         #: Number of actuated joints on the chain to the end effector (the arm proper).
         self.arm_dof: int = len(movable)
         arm = f"the arm of {self.name!r}: {self.arm_dof} joints from {self.root_link!r} to {self.ee_link!r}"
-        self.anatomy = (f"{arm} ({', '.join(str(j.name) for j in movable)}), every one actuated", *self.anatomy)
+        self.anatomy = (
+            f"{arm} ({', '.join(str(j.name) for j in movable)}), every one actuated",
+            *parsed.frozen,
+            *self.anatomy,
+        )
         log.info("%s", self.anatomy[0])
         if len(set(tool_joints)) != len(tool_joints):
             raise URDFError(f"tool_joints {list(tool_joints)} name a joint twice")

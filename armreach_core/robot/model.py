@@ -57,6 +57,8 @@ class RobotModel(ArmKinematics):
         package_dirs, xacro_args, allow_xacro_env: where ROS packages live, a xacro file's
             arguments, and whether it may read the environment (see
             :func:`armreach_core.robot.urdf.read_urdf`).
+        frozen_joints: movable joints made fixed at a value, name -> rad or m
+            (:mod:`armreach_core.robot.freeze`); the arm's chain starts below them.
 
     Attributes:
         home: the home pose (read-only array); everything else as
@@ -80,6 +82,7 @@ class RobotModel(ArmKinematics):
         package_dirs: Mapping[str, str] | None = None,
         xacro_args: Mapping[str, str] | None = None,
         allow_xacro_env: bool = False,
+        frozen_joints: Mapping[str, float] | None = None,
     ) -> None:
         position, orientation = base_pose(base_position, base_orientation)
         parsed = read_urdf(
@@ -88,6 +91,7 @@ class RobotModel(ArmKinematics):
             package_dirs=package_dirs,
             xacro_args=xacro_args,
             allow_xacro_env=allow_xacro_env,
+            frozen_joints=frozen_joints,
         )
         self._build(parsed, ee_link, tool_joints, position, orientation)
         placed, q = place(self, home, base_given=base_position is not None)

@@ -11,6 +11,7 @@ It is hashable, compares by value and is written into run folders (:meth:`ArmSpe
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, replace
@@ -38,9 +39,10 @@ ARM_KEYS = (
     "package_dirs",
     "xacro_args",
     "allow_xacro_env",
+    "frozen_joints",
 )
 #: The keys whose value is a mapping of names to strings (kept as sorted pairs, so a spec hashes).
-PAIR_KEYS = ("package_dirs", "xacro_args")
+PAIR_KEYS = ("package_dirs", "xacro_args", "frozen_joints")
 
 
 @dataclass(frozen=True)
@@ -64,6 +66,8 @@ class ArmSpec:
             and ``ROS_PACKAGE_PATH`` (:mod:`armreach_core.robot.packages`).
         xacro_args: a xacro file's arguments, ``(name, value)`` pairs sorted by name.
         allow_xacro_env: let a xacro file read environment variables (``$(env ...)``).
+        frozen_joints: movable joints made fixed at a value (rad or m), ``(name, value)`` pairs
+            sorted by name, the value as ``repr(float)`` (:mod:`armreach_core.robot.freeze`).
     """
 
     urdf: str | None = None
@@ -77,6 +81,7 @@ class ArmSpec:
     package_dirs: tuple[tuple[str, str], ...] | None = None
     xacro_args: tuple[tuple[str, str], ...] | None = None
     allow_xacro_env: bool | None = None
+    frozen_joints: tuple[tuple[str, str], ...] | None = None
 
     @classmethod
     def create(
@@ -93,6 +98,7 @@ class ArmSpec:
         package_dirs: Mapping[str, str | os.PathLike[str]] | None = None,
         xacro_args: Mapping[str, Any] | None = None,
         allow_xacro_env: bool | None = None,
+        frozen_joints: Mapping[str, Any] | None = None,
     ) -> ArmSpec:
         """A checked spec: types and shapes validated, the path made absolute, the quaternion normalized.
 
@@ -145,6 +151,7 @@ class ArmSpec:
             package_dirs=_pairs("package_dirs", package_dirs, folders=True),
             xacro_args=_pairs("xacro_args", xacro_args),
             allow_xacro_env=allow_xacro_env,
+            frozen_joints=_values("frozen_joints", _pairs("frozen_joints", frozen_joints)),
         )
 
     @classmethod
@@ -193,6 +200,22 @@ class ArmSpec:
             home=self.home if self.home is not None else defaults.home,
             tool_joints=self.tool_joints if self.tool_joints is not None else defaults.tool_joints,
         )
+
+
+def _values(key: str, pairs: tuple[tuple[str, str], ...] | None) -> tuple[tuple[str, str], ...] | None:
+    """``pairs`` whose values are finite numbers, each as ``repr(float)`` (so 0 and 0.0 are one spec)."""
+    if pairs is None:
+        return None
+    out = []
+    for name, text in pairs:
+        try:
+            number = float(text)
+        except ValueError:
+            number = math.nan
+        if not math.isfinite(number):
+            raise ConfigError(f"{key}: {name}={text!r} must be a finite number (rad, or m for a prismatic joint)")
+        out.append((name, repr(number)))
+    return tuple(out)
 
 
 def _pairs(key: str, value: Any, *, folders: bool = False) -> tuple[tuple[str, str], ...] | None:

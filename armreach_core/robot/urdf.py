@@ -34,6 +34,7 @@ from lxml import etree
 
 from armreach_core.errors import URDFError
 from armreach_core.robot.checks import check_tree
+from armreach_core.robot.freeze import freeze_joints
 from armreach_core.robot.packages import ROS_PACKAGE_PATH, Packages
 from armreach_core.robot.xacro_sandbox import is_xacro, process_xacro
 
@@ -77,6 +78,8 @@ class ParsedURDF:
     path: Path
     model: yourdfpy.URDF
     resolved_xml: bytes
+    #: What ``frozen_joints`` made fixed, one sentence a joint (:func:`~armreach_core.robot.freeze.freeze_joints`).
+    frozen: tuple[str, ...] = ()
 
 
 def _safe_parser() -> etree.XMLParser:
@@ -288,6 +291,7 @@ def read_urdf(
     package_dirs: Mapping[str, str] | None = None,
     xacro_args: Mapping[str, str] | None = None,
     allow_xacro_env: bool = False,
+    frozen_joints: Mapping[str, float] | None = None,
 ) -> ParsedURDF:
     """Read and check a URDF file, or a xacro file (processed first: :mod:`armreach_core.robot.xacro_sandbox`).
 
@@ -299,6 +303,8 @@ def read_urdf(
             ``package://NAME/...``; :class:`~armreach_core.robot.packages.Packages`).
         xacro_args: a xacro file's arguments (``<xacro:arg>``), name -> value.
         allow_xacro_env: let a xacro file read environment variables (``$(env ...)``, ``$(optenv ...)``).
+        frozen_joints: movable joints made fixed at a value, name -> rad or m
+            (:mod:`armreach_core.robot.freeze`).
 
     Raises:
         URDFError: the file is missing, too large, declares a DTD or entities, is not
@@ -357,6 +363,7 @@ def read_urdf(
         )
     try:
         check_tree(root)
+        frozen = freeze_joints(root, frozen_joints or {})
     except URDFError as exc:
         raise URDFError(f"URDF file {str(urdf_path)!r}: {exc}") from None
 
@@ -387,4 +394,4 @@ def read_urdf(
         ) from None
     except Exception as exc:  # yourdfpy raises bare ValueError/TypeError/AttributeError on bad content
         raise URDFError(f"URDF file {str(urdf_path)!r} could not be parsed: {type(exc).__name__}: {exc}") from None
-    return ParsedURDF(path=urdf_path.resolve(), model=model, resolved_xml=resolved)
+    return ParsedURDF(path=urdf_path.resolve(), model=model, resolved_xml=resolved, frozen=frozen)

@@ -1,0 +1,102 @@
+"""Joints frozen where the user puts them: a movable joint made a fixed one at a given value.
+
+Some descriptions hold more joints than the arm a user trains: a mobile manipulator whose base
+is three joints at the root of the chain (ManiSkill's Fetch: two rails of ±20 m and a turn, so
+its targets would fill a ball of 14.6 m), a gantry whose rails carry several arms (compas_fab's
+RFL), a humanoid's legs. ``frozen_joints={NAME: VALUE}`` (``--freeze-joint NAME=VALUE``) turns
+each named joint into a fixed joint at VALUE (rad, or m along a prismatic joint's axis) in the
+URDF that the kinematics and both engines read (:func:`armreach_core.robot.urdf.read_urdf`), so
+each of them sees the same arm, whose chain then starts below the frozen joints.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from armreach_core.errors import URDFError
+from armreach_core.robot.placement import rotation
+from armreach_core.robot.rotations import matrix_rpy, origin_matrix
+
+#: Joint types a value can freeze.
+FREEZABLE = ("revolute", "continuous", "prismatic")
+#: What a frozen joint keeps of its children: the rest says how it moves.
+_KEPT = ("parent", "child", "origin")
+
+
+def freeze_joints(root: Any, frozen: Mapping[str, float]) -> tuple[str, ...]:
+    """Make each joint of the URDF tree ``root`` named in ``frozen`` a fixed joint at its value, in
+    place; one sentence a joint saying so.
+
+    Raises:
+        URDFError: a name that is no movable joint, a value outside the joint's limits, or a
+            joint left moving that mimics a frozen one.
+    """
+    joints = {str(joint.get("name")): joint for joint in root.findall("joint")}
+    movable = [name for name, joint in joints.items() if joint.get("type") in FREEZABLE]
+    for name, value in frozen.items():
+        joint = joints.get(name)
+        if joint is None or joint.get("type") not in FREEZABLE:
+            what = "no joint of the URDF" if joint is None else f"a {joint.get('type')} joint, which does not move"
+            raise URDFError(
+                f"frozen_joints names {name!r}, {what}; freeze one of its movable joints: {', '.join(movable)}"
+            )
+        _check_value(joint, name, value)
+        followers = [
+            other
+            for other, element in joints.items()
+            if other not in frozen and (mimic := element.find("mimic")) is not None and mimic.get("joint") == name
+        ]
+        if followers:
+            raise URDFError(
+                f"joint {', '.join(map(repr, followers))} mimics {name!r}, which frozen_joints freezes: freeze it too "
+                "(at its multiplier times the value plus its offset)"
+            )
+    said = []
+    for name, value in frozen.items():
+        unit = "m" if joints[name].get("type") == "prismatic" else "rad"
+        _freeze(joints[name], value)
+        said.append(f"{name!r} frozen at {value:g} {unit} (frozen_joints): fixed for the kinematics and the engines")
+    return tuple(said)
+
+
+def _check_value(joint: Any, name: str, value: float) -> None:
+    if not math.isfinite(value):
+        raise URDFError(f"frozen_joints gives joint {name!r} the value {value!r}; give a finite number")
+    limit = joint.find("limit")
+    if joint.get("type") == "continuous" or limit is None:
+        return
+    lower, upper = (float(limit.get(bound) or 0.0) for bound in ("lower", "upper"))  # a left-out bound is 0
+    if not lower <= value <= upper:
+        unit = "m" if joint.get("type") == "prismatic" else "rad"
+        raise URDFError(
+            f"frozen_joints gives joint {name!r} {value:g} {unit}, outside its limits [{lower:g}, {upper:g}]; "
+            "give a value within them"
+        )
+
+
+def _freeze(joint: Any, value: float) -> None:
+    """``joint`` made fixed, its child placed where the joint at ``value`` puts it."""
+    axis_element = joint.find("axis")
+    text = axis_element.get("xyz") if axis_element is not None else None
+    axis = np.array([float(v) for v in text.split()] if text else [1.0, 0.0, 0.0])  # URDF's default axis
+    axis /= np.linalg.norm(axis)
+    if joint.get("type") == "prismatic":
+        motion = np.eye(4)
+        motion[:3, 3] = value * axis
+    else:
+        motion = np.asarray(rotation(axis, np.asarray(value, dtype=np.float64)), dtype=np.float64)
+    transform = origin_matrix(joint.find("origin")) @ motion
+    for child in list(joint):
+        if not isinstance(child.tag, str) or child.tag not in _KEPT:
+            joint.remove(child)
+    origin = joint.find("origin")
+    if origin is None:
+        origin = joint.makeelement("origin", {})
+        joint.append(origin)
+    origin.set("xyz", " ".join(repr(float(v)) for v in transform[:3, 3]))
+    origin.set("rpy", " ".join(repr(v) for v in matrix_rpy(transform[:3, :3])))
+    joint.set("type", "fixed")
