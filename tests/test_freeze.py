@@ -132,3 +132,15 @@ def test_a_run_trained_with_a_frozen_joint_is_evaluated_on_the_same_arm(tmp_path
     without_value = ["rollout", "--urdf", str(ar6_urdf), "--freeze-joint", "shoulder_lift_joint"]
     assert main([*without_value, "--out", str(tmp_path / "r")]) == 2
     assert "--freeze-joint 'shoulder_lift_joint': expected NAME=VALUE" in capsys.readouterr().err
+
+
+def test_the_bundled_arm_with_a_joint_frozen_chooses_its_own_home():
+    """The registered ar6's home has six values, one per joint of the whole arm: with a joint
+    frozen, the home is searched for the arm that is left, as for any URDF."""
+    env = ArmEnv("reach", backend=BACKENDS[0], frozen_joints={"wrist_3_joint": 0.2})
+    try:
+        assert env.robot.dof == 5 and env.robot.home.shape == (5,)
+        env.reset(seed=0)
+        assert np.isfinite(env.step(np.zeros(5, dtype=np.float32))[4]["distance"])
+    finally:
+        env.close()

@@ -192,12 +192,14 @@ class ArmSpec:
         return {key: tuple(value) if isinstance(value, list) else value for key, value in self.to_dict().items()}
 
     def with_defaults(self, defaults: ArmSpec) -> ArmSpec:
-        """This spec with ``defaults`` (a registered robot's description) filling what it leaves unset."""
+        """This spec with ``defaults`` (a registered robot's description) filling what it leaves unset;
+        a registered home is for the whole arm, so one with joints frozen chooses its own."""
+        home = defaults.home if self.frozen_joints is None else None
         return replace(
             self,
             urdf=self.urdf if self.urdf is not None else defaults.urdf,
             ee_link=self.ee_link if self.ee_link is not None else defaults.ee_link,
-            home=self.home if self.home is not None else defaults.home,
+            home=self.home if self.home is not None else home,
             tool_joints=self.tool_joints if self.tool_joints is not None else defaults.tool_joints,
         )
 
