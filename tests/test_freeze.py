@@ -144,3 +144,21 @@ def test_the_bundled_arm_with_a_joint_frozen_chooses_its_own_home():
         assert np.isfinite(env.step(np.zeros(5, dtype=np.float32))[4]["distance"])
     finally:
         env.close()
+
+
+def test_a_rail_under_the_arm_is_reported_with_the_freeze_that_takes_it_out(tmp_path, ar6_urdf):
+    """ar6 on a 20 m rail: the arm's targets would fill what the rail reaches. The model says so and
+    names the flag; frozen, the rail is gone and so is the warning. (No corpus arm is reported: the
+    Stretch's lift, 1.1 m over 0.68 m of arm, travels the most, 1.6 times the chain below it.)"""
+    text = ar6_urdf.read_text()
+    start = text.index('<joint name="world_joint"')
+    end = text.index("</joint>", start)
+    rail = text[start:end].replace('type="fixed"', 'type="prismatic"')
+    rail += '<axis xyz="1 0 0"/><limit lower="-10" upper="10" effort="1000" velocity="1"/>'
+    path = tmp_path / "rail.urdf"
+    path.write_text(text[:start] + rail + text[end:])
+    on_rail = RobotModel(str(path))
+    [note] = on_rail.geometry_warnings
+    assert "prismatic joint 'world_joint' travels 20 m" in note and "--freeze-joint world_joint=0" in note
+    assert RobotModel(str(path), frozen_joints={"world_joint": 0.0}).geometry_warnings == ()
+    assert RobotModel(str(ar6_urdf)).geometry_warnings == ()

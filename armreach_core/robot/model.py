@@ -21,6 +21,7 @@ import logging
 import os
 from collections.abc import Mapping
 
+import numpy as np
 import numpy.typing as npt
 
 from armreach_core.robot.home import place
@@ -31,6 +32,11 @@ from armreach_core.robot.statics import HOLD_MARGIN, sized_efforts
 from armreach_core.robot.urdf import ParsedURDF, read_urdf
 
 log = logging.getLogger("armreach.robot")
+
+#: A prismatic joint of the chain travelling more than this many times the chain below it is reported
+#: as a mobile base or a rail (ManiSkill's Fetch: 21 times; the most among the corpus arms, the
+#: Stretch's lift: 1.6 times).
+LONG_TRAVEL = 3.0
 
 __all__ = ["MOVABLE_TYPES", "FloatArray", "HeldJoint", "JointSpec", "Mimic", "RobotModel"]
 
@@ -94,6 +100,7 @@ class RobotModel(ArmKinematics):
             frozen_joints=frozen_joints,
         )
         self._build(parsed, ee_link, tool_joints, position, orientation)
+        self._report_long_travel()
         placed, q = place(self, home, base_given=base_position is not None)
         if placed != position:  # the base was raised: the same arm, placed higher
             self._build(parsed, ee_link, tool_joints, placed, orientation)
@@ -104,10 +111,31 @@ class RobotModel(ArmKinematics):
         self.home: FloatArray = q
         self._sealed = True
 
-    #: What the description's geometry gets wrong (one sentence each).
+    #: What the description's geometry gets wrong, or makes of the arm (one sentence each).
     geometry_warnings: tuple[str, ...] = ()
     #: Links whose collision geometry is off the kinematics: no engine or check collides with it.
     uncollided_links: frozenset[str] = frozenset()
+
+    def _report_long_travel(self) -> None:
+        """Warn of each prismatic joint of the chain that travels more than :data:`LONG_TRAVEL` times
+        the length of the chain below it: a mobile base given as joints, or a gantry's rail (ManiSkill's
+        Fetch: 40 m rails under a 1.9 m torso and arm), whose targets would fill a ball of that size."""
+        q = self.clip(np.zeros(self.dof))
+        frames, _ = self.chain_frames(q)
+        points = [np.asarray(origin) for origin, _, _ in frames] + [self.forward_kinematics(q)]
+        for i, joint in enumerate(self.joints[: self.arm_dof]):
+            travel = joint.upper - joint.lower
+            below = sum(float(np.linalg.norm(points[k + 1] - points[k])) for k in range(i, self.arm_dof))
+            if joint.type == "prismatic" and travel > LONG_TRAVEL * below:
+                value = float(np.clip(0.0, joint.lower, joint.upper))
+                note = (
+                    f"prismatic joint {joint.name!r} travels {travel:.3g} m, over {LONG_TRAVEL:g} times the "
+                    f"{below:.2f} m of the chain below it: a mobile base or a gantry's rail? The targets fill what "
+                    f"it reaches; to train the arm alone, freeze it: frozen_joints={{{joint.name!r}: {value:g}}} "
+                    f"(--freeze-joint {joint.name}={value:g})"
+                )
+                log.warning("%s", note)
+                self.geometry_warnings = (*self.geometry_warnings, note)
 
     def _report_misplaced_geometry(self) -> None:
         from armreach_core.robot.geometry import misplaced_geometry
@@ -123,7 +151,7 @@ class RobotModel(ArmKinematics):
             )
             log.warning("%s", note)
             self.anatomy = (*self.anatomy, note)
-            self.geometry_warnings = (note,)
+            self.geometry_warnings = (*self.geometry_warnings, note)
             self.uncollided_links = frozenset(far)
 
     def _build(
