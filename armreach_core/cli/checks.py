@@ -38,13 +38,7 @@ def check_urdf(urdf: str | Path | None, description: Mapping[str, Any] | None = 
         from armreach_core.robot.urdf import read_urdf
 
         spec = ArmSpec.create(urdf, **dict(description or {}))
-        read_urdf(
-            urdf,
-            package_dirs=dict(spec.package_dirs or ()),
-            xacro_args=dict(spec.xacro_args or ()),
-            allow_xacro_env=bool(spec.allow_xacro_env),
-            frozen_joints={name: float(value) for name, value in spec.frozen_joints or ()},
-        )
+        read_urdf(urdf, **spec.description())
 
 
 def check_counts(**counts: tuple[int, int]) -> None:

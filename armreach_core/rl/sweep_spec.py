@@ -109,13 +109,7 @@ def resolve_arm_urdf(
     from armreach_core.robot.urdf import read_urdf
 
     spec = ArmSpec.create(path, **dict(description or {}))
-    read_urdf(  # a file that is no URDF is refused here, before any trial starts
-        path,
-        package_dirs=dict(spec.package_dirs or ()),
-        xacro_args=dict(spec.xacro_args or ()),
-        allow_xacro_env=bool(spec.allow_xacro_env),
-        frozen_joints={name: float(value) for name, value in spec.frozen_joints or ()},
-    )
+    read_urdf(path, **spec.description())  # a file that is no URDF is refused here, before any trial starts
     return path.stem, str(path.resolve()), {}
 
 

@@ -29,10 +29,7 @@ def _build(spec: ArmSpec, mtime: float, ros_package_path: str) -> RobotModel:
         allow_external_meshes=spec.allow_external_meshes,
         base_position=spec.base_position,
         base_orientation=spec.base_orientation,
-        package_dirs=dict(spec.package_dirs or ()),
-        xacro_args=dict(spec.xacro_args or ()),
-        allow_xacro_env=bool(spec.allow_xacro_env),
-        frozen_joints={name: float(value) for name, value in spec.frozen_joints or ()},
+        **spec.description(),
     )
 
 

@@ -18,13 +18,11 @@ from typing import Any
 import numpy as np
 
 from armreach_core.errors import URDFError
-from armreach_core.robot.placement import rotation
-from armreach_core.robot.rotations import matrix_rpy, origin_matrix
+from armreach_core.robot.origins import make_fixed, origin_of
+from armreach_core.robot.walk import joint_motion
 
 #: Joint types a value can freeze.
 FREEZABLE = ("revolute", "continuous", "prismatic")
-#: What a frozen joint keeps of its children: the rest says how it moves.
-_KEPT = ("parent", "child", "origin")
 
 
 def freeze_joints(root: Any, frozen: Mapping[str, float]) -> tuple[str, ...]:
@@ -83,20 +81,5 @@ def _freeze(joint: Any, value: float) -> None:
     axis_element = joint.find("axis")
     text = axis_element.get("xyz") if axis_element is not None else None
     axis = np.array([float(v) for v in text.split()] if text else [1.0, 0.0, 0.0])  # URDF's default axis
-    axis /= np.linalg.norm(axis)
-    if joint.get("type") == "prismatic":
-        motion = np.eye(4)
-        motion[:3, 3] = value * axis
-    else:
-        motion = np.asarray(rotation(axis, np.asarray(value, dtype=np.float64)), dtype=np.float64)
-    transform = origin_matrix(joint.find("origin")) @ motion
-    for child in list(joint):
-        if not isinstance(child.tag, str) or child.tag not in _KEPT:
-            joint.remove(child)
-    origin = joint.find("origin")
-    if origin is None:
-        origin = joint.makeelement("origin", {})
-        joint.append(origin)
-    origin.set("xyz", " ".join(repr(float(v)) for v in transform[:3, 3]))
-    origin.set("rpy", " ".join(repr(v) for v in matrix_rpy(transform[:3, :3])))
-    joint.set("type", "fixed")
+    motion = joint_motion(str(joint.get("type")), axis / np.linalg.norm(axis), np.asarray(value, dtype=np.float64))
+    make_fixed(joint, origin_of(joint) @ motion)

@@ -42,6 +42,7 @@ made a Kinova Gen3 lite's shoulder give way under a phantom 1 kg at its tool). A
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -49,7 +50,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.robot.rotations import origin_matrix
+from armreach_core.robot.origins import origin_of
 
 #: Density (kg/m³) of the most compact material arms are built of: steel.
 DENSEST = 7850.0
@@ -101,12 +102,12 @@ def repaired(
     mass: float,
     tensor: np.ndarray[Any, Any],
     span: float = math.inf,
-    shape: np.ndarray[Any, Any] | None = None,
+    shape: Callable[[], np.ndarray[Any, Any] | None] | None = None,
 ) -> tuple[np.ndarray[Any, Any], str] | None:
     """The tensor an engine should get for a link of ``mass`` whose inertia is ``tensor``, on a
     robot whose joint offsets add up to ``span`` m, and why; ``None`` when it is fine as it is.
-    ``shape`` is the link's :func:`hull_inertia` in the tensor's frame (``None``: no collision
-    geometry, or not looked at), used where ``tensor`` is no inertia at all."""
+    ``shape()`` gives the link's :func:`hull_inertia` in the tensor's frame (``None``: no collision
+    geometry), asked only where ``tensor`` is no inertia at all (no ``shape``: the steel ball)."""
     moments = np.linalg.eigvalsh(tensor)
     floor = ball_moment(mass)
     shown = ", ".join(f"{m:.3g}" for m in moments)
@@ -119,7 +120,8 @@ def repaired(
             f"principal moments {shown} kg·m², not positive semi-definite: given those of its {mass:.4g} kg spread "
             "evenly through its collision geometry's convex hull, or a steel ball's where it has none"
         )
-        return (floor * np.eye(3) if shape is None else mass * shape), why
+        solid = None if shape is None else shape()
+        return (floor * np.eye(3) if solid is None else mass * solid), why
     if float(moments.sum()) < 3.0 * floor:
         why = f"more compact than a steel ball of {mass:.4g} kg: given that ball's {floor:.3g} kg·m²"
         return np.eye(3) * floor, why
@@ -163,21 +165,19 @@ def repairs(root: Any, shape_of: ShapeOf | None = None) -> list[tuple[Any, np.nd
         if mass_element is None or inertia is None:
             continue
         tensor = inertia_tensor({key: float(inertia.get(key, "0")) for key in INERTIA_KEYS})
-        shape = None
-        if shape_of is not None and not is_inertia(np.linalg.eigvalsh(tensor)):
-            shape = _in_inertial_frame(shape_of(str(link.get("name"))), inertial)
+        shape = None if shape_of is None else functools.partial(_solid, shape_of, str(link.get("name")), inertial)
         fix = repaired(float(mass_element.get("value", "0")), tensor, span, shape)
         if fix is not None:
             found.append((inertia, fix[0], fix[1]))
     return found
 
 
-def _in_inertial_frame(tensor: np.ndarray[Any, Any] | None, inertial: Any) -> np.ndarray[Any, Any] | None:
-    """A tensor given in the link's frame, turned into the frame of its ``<inertial>``'s origin."""
-    origin = inertial.find("origin")
-    if tensor is None or origin is None or not origin.get("rpy"):
-        return tensor
-    rotation = origin_matrix(origin)[:3, :3]
+def _solid(shape_of: ShapeOf, link: str, inertial: Any) -> np.ndarray[Any, Any] | None:
+    """``link``'s :func:`hull_inertia` (from ``shape_of``), turned into the frame of its ``<inertial>``'s origin."""
+    tensor = shape_of(link)
+    if tensor is None:
+        return None
+    rotation = origin_of(inertial)[:3, :3]
     turned: np.ndarray[Any, Any] = rotation.T @ tensor @ rotation
     return turned
 

@@ -191,6 +191,17 @@ class ArmSpec:
         """The env's keyword arguments for this arm (unset fields left out)."""
         return {key: tuple(value) if isinstance(value, list) else value for key, value in self.to_dict().items()}
 
+    def description(self) -> dict[str, Any]:
+        """How the URDF is read: the keyword arguments of :func:`armreach_core.robot.urdf.read_urdf`
+        (and :class:`~armreach_core.robot.model.RobotModel`) for ``package_dirs``, ``xacro_args``,
+        ``allow_xacro_env`` and ``frozen_joints``."""
+        return {
+            "package_dirs": dict(self.package_dirs or ()),
+            "xacro_args": dict(self.xacro_args or ()),
+            "allow_xacro_env": bool(self.allow_xacro_env),
+            "frozen_joints": {name: float(value) for name, value in self.frozen_joints or ()},
+        }
+
     def with_defaults(self, defaults: ArmSpec) -> ArmSpec:
         """This spec with ``defaults`` (a registered robot's description) filling what it leaves unset;
         a registered home is for the whole arm, so one with joints frozen chooses its own."""

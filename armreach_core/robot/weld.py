@@ -22,10 +22,10 @@ from types import MappingProxyType
 
 import numpy as np
 from lxml import etree
-from trimesh.transformations import euler_from_matrix, euler_matrix
 
 from armreach_core.robot.kinematics import joint_motion
 from armreach_core.robot.model import FloatArray, HeldJoint, RobotModel
+from armreach_core.robot.origins import make_fixed
 
 
 def follows_actuated(robot: RobotModel, held: HeldJoint) -> bool:
@@ -53,34 +53,8 @@ def weld(urdf: bytes, robot: RobotModel, joints: Mapping[str, float]) -> bytes:
             continue
         tree = frames[name]
         held: FloatArray = tree.origin @ joint_motion(tree.kind, tree.axis, np.asarray(joints[name]))
-        set_origin(joint, held)
-        joint.set("type", "fixed")
-        for tag in ("axis", "limit", "mimic", "dynamics", "calibration", "safety_controller"):
-            for element in joint.findall(tag):
-                joint.remove(element)
+        make_fixed(joint, held)
     return bytes(etree.tostring(root))
 
 
-def origin_of(element: etree._Element) -> FloatArray:
-    """The 4x4 transform of an element's ``<origin>`` (a joint's, a visual's...)."""
-    origin = element.find("origin")
-    matrix = np.eye(4)
-    if origin is not None:
-        roll, pitch, yaw = (float(v) for v in origin.get("rpy", "0 0 0").split())
-        matrix = np.asarray(euler_matrix(roll, pitch, yaw, "sxyz"), dtype=np.float64)  # type: ignore[no-untyped-call]
-        matrix[:3, 3] = [float(v) for v in origin.get("xyz", "0 0 0").split()]
-    return matrix
-
-
-def set_origin(element: etree._Element, matrix: FloatArray) -> None:
-    """Write ``matrix`` as ``element``'s ``<origin>`` (URDF's fixed-axis roll, pitch, yaw)."""
-    origin = element.find("origin")
-    if origin is None:
-        origin = etree.Element("origin")
-        element.insert(0, origin)
-    origin.set("xyz", " ".join(repr(float(v)) for v in matrix[:3, 3]))
-    rpy = euler_from_matrix(matrix, "sxyz")  # type: ignore[no-untyped-call]
-    origin.set("rpy", " ".join(repr(float(v)) for v in rpy))
-
-
-__all__ = ["follows_actuated", "origin_of", "rigid_joints", "set_origin", "weld"]
+__all__ = ["follows_actuated", "rigid_joints", "weld"]

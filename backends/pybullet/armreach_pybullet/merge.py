@@ -24,8 +24,8 @@ from lxml import etree
 
 from armreach_core.robot.inertia import INERTIA_KEYS, inertia_tensor
 from armreach_core.robot.model import FloatArray
+from armreach_core.robot.origins import origin_of, set_origin
 from armreach_core.robot.statics import BARE_LINK_MASS
-from armreach_core.robot.weld import origin_of, set_origin
 
 
 @dataclass(frozen=True)
