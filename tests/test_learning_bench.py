@@ -13,7 +13,8 @@ import pytest
 pytest.importorskip("stable_baselines3")
 
 from armreach_core.cli import main
-from armreach_core.rl.learning_bench import LearningRun, summarize, to_markdown
+from armreach_core.diagnostics.pace import Pace, dense_pace, measure_pace, pace_from
+from armreach_core.rl.learning_bench import LearningRun, save, summarize, to_markdown
 
 
 def _run(argv: list[str]) -> tuple[int, str, str]:
@@ -74,6 +75,10 @@ def test_the_learning_bench_times_a_real_command_to_held_out_success(tmp_path: P
         run["timesteps"] == json.loads((out / "runs" / "ppo-pybullet-s0" / "checkpoint.json").read_text())["timesteps"]
     )
     assert "| pybullet | ppo | 1/1 |" in stdout
+    # the machine's pace before the run and after it, on the backend the bench used
+    before, after = (pace_from(p) for p in data["pace"])
+    assert list(before.engine) == list(after.engine) == ["pybullet"] and before.at <= after.at
+    assert "Machine pace before:" in stdout and "Machine pace after:" in stdout
     assert "--base-position 0.0 0.0 0.0" in (out / "runs" / "ppo-pybullet-s0" / "command.txt").read_text()
 
 
@@ -145,3 +150,36 @@ def test_bad_arm_flags_of_the_learning_bench_exit_2_before_training(
     code, _, err = _run(argv)
     assert code == 2 and message in err and "Traceback" not in err, err
     assert not (tmp_path / "b" / "runs").exists()
+
+
+def test_the_pace_times_the_engine_loop_and_one_thread_of_dense_arithmetic() -> None:
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        pace = measure_pace(["pybullet"], steps=200, repeats=1)
+        assert torch.get_num_threads() == 2  # the probe's one thread is given back
+    finally:
+        torch.set_num_threads(before)
+    (rate,) = pace.engine.values()
+    # a bare loop of the bundled arm runs thousands of steps/s here; a dense product of the
+    # paper's size tens of GFLOP/s: anything far outside is a broken probe, not a slow hour
+    assert 200 < rate < 200_000 and 1.0 < pace.dense < 2_000
+    assert 1.0 < dense_pace(products=20, repeats=1) < 2_000
+
+
+def test_the_pace_is_saved_beside_the_table_and_read_back(tmp_path: Path) -> None:
+    paces = [
+        Pace("2026-12-07T10:14:09+00:00", {"pybullet": 7899.0, "mujoco": 13168.0}, 152.4),
+        Pace("2026-12-07T10:27:00+00:00", {"pybullet": 6021.0, "mujoco": 10155.0}, 98.0),
+    ]
+    json_path, md_path = save([_run_record("ppo", 0, 30.0, True)], tmp_path, "fast", paces)
+    assert [pace_from(p) for p in json.loads(json_path.read_text())["pace"]] == paces
+    report = md_path.read_text()
+    engines = "bare engine loop pybullet 7,899, mujoco 13,168 steps/s"
+    assert f"Machine pace before: 2026-12-07T10:14:09+00:00: {engines}" in report
+    assert "Machine pace after: 2026-12-07T10:27:00+00:00" in report and "dense layer 98 GFLOP/s" in report
+    # without a pace, the report is the table alone
+    save([_run_record("ppo", 0, 30.0, True)], tmp_path / "bare", "fast")
+    assert "pace" not in (tmp_path / "bare" / "learning.md").read_text()

@@ -166,7 +166,7 @@ def run_learning(args: argparse.Namespace) -> int:
     """``--learning``: the preset's algorithms, each trained to its threshold over ``--seeds`` seeds."""
     from armreach_core.errors import ConfigError
     from armreach_core.plugins.defaults import DEFAULT_TASK
-    from armreach_core.rl.learning_bench import bench_learning, summarize, to_markdown
+    from armreach_core.rl.learning_bench import bench_learning
     from armreach_core.rl.presets import load_preset
     from armreach_core.rl.validation import UntilSuccess
 
@@ -188,8 +188,8 @@ def run_learning(args: argparse.Namespace) -> int:
             "add an until_success section to time it"
         )
     backends = _checked_backends(args)
-    results = bench_learning(algos, backends, args.seeds, args.out, preset=args.preset, arms=arms)
-    print(to_markdown(summarize(results)))
+    bench_learning(algos, backends, args.seeds, args.out, preset=args.preset, arms=arms)
+    print((args.out / "learning.md").read_text(encoding="utf-8"), end="")
     print(f"saved {args.out / 'learning.json'} and {args.out / 'learning.md'}")
     return 0
 

@@ -13,6 +13,10 @@ Per algorithm and backend: how many seeds reached the threshold, the interquarti
 and of the env steps, the final evaluation's success, and where the time went
 (:mod:`armreach_core.rl.timing`; ``start`` is the command's own start-up: imports and
 argument checks).
+
+The machine's pace (:mod:`armreach_core.diagnostics.pace`) is measured before the first run and
+after the last, and written beside the table: the same commands take up to twice as long at a
+slow hour of a shared machine, and the pace says which hour a table comes from.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TextIO
 
+from armreach_core.diagnostics.pace import Pace, describe, measure_pace
 from armreach_core.diagnostics.tables import markdown_table
 from armreach_core.errors import ConfigError
 from armreach_core.plugins.defaults import DEFAULT_ROBOT
@@ -128,10 +133,21 @@ def bench_learning(
     preset: str = "fast",
     arms: Sequence[BenchArm] = (BenchArm(),),
     stream: TextIO | None = sys.stderr,
+    pace: bool = True,
 ) -> list[LearningRun]:
     """Every (arm, backend, algo, seed) in turn; the runs stay in ``out/runs/`` (a folder per
-    run, named after its arm unless that is the bundled one) and the results in ``out``."""
+    run, named after its arm unless that is the bundled one) and the results in ``out``, with
+    the machine's pace before and after them (``pace``)."""
     results: list[LearningRun] = []
+    paces: list[Pace] = []
+
+    def take_pace() -> None:
+        if pace:
+            paces.append(measure_pace(backends))
+            if stream is not None:
+                print(f"pace {'before' if len(paces) == 1 else 'after'}: {describe(paces[-1])}", file=stream)
+
+    take_pace()
     for arm in arms:
         on = "" if arm.name == BUNDLED else f"{arm.name}-"
         for backend in backends:
@@ -146,7 +162,8 @@ def bench_learning(
                             f"{run.seconds:.1f} s; final {100 * run.final_success:.0f} %",
                             file=stream,
                         )
-    save(results, out, preset)
+    take_pace()
+    save(results, out, preset, paces)
     return results
 
 
@@ -214,11 +231,23 @@ def to_markdown(rows: Sequence[dict[str, object]]) -> str:
     return markdown_table(["arm", *header] if named else header, body)
 
 
-def save(results: Sequence[LearningRun], out: Path, preset: str) -> tuple[Path, Path]:
+def pace_lines(paces: Sequence[Pace]) -> str:
+    """The machine's pace under a table: before the first run and after the last."""
+    names = ("before", "after") if len(paces) == 2 else tuple(f"{i + 1}" for i in range(len(paces)))
+    return "\n".join(f"Machine pace {name}: {describe(p)}." for name, p in zip(names, paces, strict=True))
+
+
+def save(results: Sequence[LearningRun], out: Path, preset: str, paces: Sequence[Pace] = ()) -> tuple[Path, Path]:
     out.mkdir(parents=True, exist_ok=True)
     rows = summarize(results)
-    data = {"preset": preset, "runs": [asdict(r) for r in results], "summary": rows}
+    data = {
+        "preset": preset,
+        "runs": [asdict(r) for r in results],
+        "summary": rows,
+        "pace": [p.as_dict() for p in paces],
+    }
     json_path, md_path = out / "learning.json", out / "learning.md"
     json_path.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
-    md_path.write_text(to_markdown(rows) + "\n", encoding="utf-8")
+    report = to_markdown(rows) + ("\n\n" + pace_lines(paces) if paces else "")
+    md_path.write_text(report + "\n", encoding="utf-8")
     return json_path, md_path

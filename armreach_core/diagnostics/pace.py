@@ -1,0 +1,100 @@
+"""The machine's pace at a moment: the two speeds a training run's wall-clock follows.
+
+On a shared machine the same code runs at different speeds from one hour to the next, by up to a
+factor of two, and the engines' loop and dense arithmetic do not slow down together (on the
+2-core machine of docs/benchmarks.md, an hour that stepped the engines fast trained the paper's
+DDPG at half its best speed). A learning benchmark's seconds say little without the pace they were
+measured at, so ``armreach bench --learning`` measures it before its first run and after its last
+and writes both beside its table:
+
+* ``engine``: the bundled arm's bare engine loop on each backend, steps/s
+  (:func:`~armreach_core.diagnostics.bench.bench_bare`, episodes of
+  :data:`~armreach_core.diagnostics.bench.EPISODE_STEPS` steps), what env steps follow;
+* ``dense``: float32 GFLOP/s of one dense layer's product, a batch of :data:`DENSE_BATCH`
+  through :data:`DENSE_WIDTH` x :data:`DENSE_WIDTH` weights (the paper's networks and batch) on one
+  torch thread, what a learner's updates follow.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from datetime import datetime, timezone
+from typing import Any
+
+from armreach_core.diagnostics.bench import EPISODE_STEPS, bench_bare, best_of
+
+#: Rows of the timed product: the paper's DDPG batch.
+DENSE_BATCH = 300
+#: Width of the timed layer: the paper's 256-unit hidden layers.
+DENSE_WIDTH = 256
+
+
+@dataclass(frozen=True)
+class Pace:
+    """The two speeds at ``at`` (UTC, ISO 8601)."""
+
+    at: str
+    #: Bare engine loop steps/s of the bundled arm, per backend.
+    engine: dict[str, float]
+    #: GFLOP/s of the dense layer's product on one thread.
+    dense: float
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def engine_pace(backend: str, steps: int = 2000, repeats: int = 3) -> float:
+    """Bare engine loop steps/s of the bundled arm on ``backend``: the best of ``repeats`` runs of ``steps``."""
+    from armreach_core.env import ArmEnv
+
+    env = ArmEnv(backend=backend, max_episode_steps=EPISODE_STEPS)
+    try:
+        return bench_bare(env, steps, repeats)
+    finally:
+        env.close()
+
+
+def dense_pace(products: int = 200, repeats: int = 3) -> float:
+    """GFLOP/s of ``products`` float32 products of the dense layer on one torch thread (the best of
+    ``repeats``); torch's thread count is as before afterwards."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        generator = torch.Generator().manual_seed(0)
+        inputs = torch.rand(DENSE_BATCH, DENSE_WIDTH, generator=generator)
+        weights = torch.rand(DENSE_WIDTH, DENSE_WIDTH, generator=generator)
+        out = torch.empty(DENSE_BATCH, DENSE_WIDTH)
+        torch.mm(inputs, weights, out=out)  # warm: the first call allocates and picks its kernel
+
+        def run() -> float:
+            t0 = time.perf_counter()
+            for _ in range(products):
+                torch.mm(inputs, weights, out=out)
+            return time.perf_counter() - t0
+
+        seconds = best_of(repeats, run)
+    finally:
+        torch.set_num_threads(before)
+    return 2.0 * DENSE_BATCH * DENSE_WIDTH * DENSE_WIDTH * products / seconds / 1e9
+
+
+def measure_pace(backends: Sequence[str], steps: int = 2000, repeats: int = 3) -> Pace:
+    """Both speeds now, the engine loop on each of ``backends``."""
+    at = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    engine = {backend: engine_pace(backend, steps, repeats) for backend in backends}
+    return Pace(at, engine, dense_pace(repeats=repeats))
+
+
+def describe(pace: Pace) -> str:
+    """One line: when, each backend's bare engine loop steps/s, and the dense layer's GFLOP/s."""
+    engines = ", ".join(f"{name} {rate:,.0f}" for name, rate in pace.engine.items())
+    return f"{pace.at}: bare engine loop {engines} steps/s; dense layer {pace.dense:,.0f} GFLOP/s (one thread)"
+
+
+def pace_from(data: dict[str, Any]) -> Pace:
+    """A :class:`Pace` read back from :meth:`Pace.as_dict`."""
+    return Pace(str(data["at"]), {str(k): float(v) for k, v in data["engine"].items()}, float(data["dense"]))
