@@ -201,6 +201,22 @@ def test_report_only_rebuilds_the_report_from_the_trial_folders_without_ray(
     time_split = report.split("## Where the time went", 1)[1]
     assert "| sac-ar6-pybullet-s0 | 1.7 | 250 | 30 | 6 | 0 | 60 | 4 | – |" in time_split
     assert "ppo-ar6-pybullet-s0" not in time_split
+    assert "Machine pace" not in report  # a sweep that recorded none
+
+
+def test_the_report_gives_the_pace_the_sweep_recorded(finished_sweep: tuple[Path, Path]) -> None:
+    from armreach_core.diagnostics.pace import Pace, save_paces
+    from armreach_core.rl.sweep_report import PACE, write_report
+
+    spec_path, out = finished_sweep
+    paces = [
+        Pace("2026-12-07T10:56:30+00:00", {"pybullet": 7899.0}, 102.4),
+        Pace("2026-12-07T11:26:26+00:00", {"pybullet": 7126.0}, 98.0),
+    ]
+    save_paces(out / PACE, paces)
+    report = write_report(out, collect(out, load_spec(spec_path))).read_text()
+    before = "Machine pace before: 2026-12-07T10:56:30+00:00: bare engine loop pybullet 7,899 steps/s; dense layer 102"
+    assert before in report and "Machine pace after: 2026-12-07T11:26:26+00:00" in report
 
 
 @pytest.mark.parametrize(
@@ -402,6 +418,13 @@ def test_local_sweep_runs_every_trial_into_a_run_folder_and_one_report(tmp_path:
     assert len((out / "trials.csv").read_text().strip().splitlines()) == 1 + 4
     report = (out / "report.md").read_text()
     assert "| ppo-ar6-pybullet | 2 |" in report and "| sac-ar6-pybullet | 2 |" in report
+    # run on this machine alone: its pace before and after, on the sweep's backend
+    from armreach_core.diagnostics.pace import load_paces
+    from armreach_core.rl.sweep_report import PACE
+
+    before, after = load_paces(out / PACE)
+    assert list(before.engine) == ["pybullet"] and before.at <= after.at and before.dense > 0
+    assert "Machine pace before:" in report and "Machine pace after:" in report
     assert (out / "curves.png").stat().st_size > 1000
     for trial in spec.trials():  # normal run folders: `armreach evaluate` works on each
         run_dir = out / "runs" / trial.id

@@ -17,10 +17,12 @@ and writes both beside its table:
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
+from pathlib import Path
 from typing import Any
 
 from armreach_core.diagnostics.bench import EPISODE_STEPS, bench_bare, best_of
@@ -93,6 +95,23 @@ def describe(pace: Pace) -> str:
     """One line: when, each backend's bare engine loop steps/s, and the dense layer's GFLOP/s."""
     engines = ", ".join(f"{name} {rate:,.0f}" for name, rate in pace.engine.items())
     return f"{pace.at}: bare engine loop {engines} steps/s; dense layer {pace.dense:,.0f} GFLOP/s (one thread)"
+
+
+def pace_lines(paces: Sequence[Pace]) -> str:
+    """The machine's pace under a report: before its first run and after its last."""
+    names = ("before", "after") if len(paces) == 2 else tuple(f"{i + 1}" for i in range(len(paces)))
+    return "\n".join(f"Machine pace {name}: {describe(p)}." for name, p in zip(names, paces, strict=True))
+
+
+def save_paces(path: Path, paces: Sequence[Pace]) -> None:
+    path.write_text(json.dumps([p.as_dict() for p in paces], indent=2) + "\n", encoding="utf-8")
+
+
+def load_paces(path: Path) -> list[Pace]:
+    """The paces :func:`save_paces` wrote to ``path``; none where it wrote nothing."""
+    if not path.is_file():
+        return []
+    return [pace_from(p) for p in json.loads(path.read_text(encoding="utf-8"))]
 
 
 def pace_from(data: dict[str, Any]) -> Pace:

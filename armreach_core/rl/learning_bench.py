@@ -31,7 +31,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TextIO
 
-from armreach_core.diagnostics.pace import Pace, describe, measure_pace
+from armreach_core.diagnostics.pace import Pace, describe, measure_pace, pace_lines
 from armreach_core.diagnostics.tables import markdown_table
 from armreach_core.errors import ConfigError
 from armreach_core.plugins.defaults import DEFAULT_ROBOT
@@ -229,12 +229,6 @@ def to_markdown(rows: Sequence[dict[str, object]]) -> str:
         for row in rows
     ]
     return markdown_table(["arm", *header] if named else header, body)
-
-
-def pace_lines(paces: Sequence[Pace]) -> str:
-    """The machine's pace under a table: before the first run and after the last."""
-    names = ("before", "after") if len(paces) == 2 else tuple(f"{i + 1}" for i in range(len(paces)))
-    return "\n".join(f"Machine pace {name}: {describe(p)}." for name, p in zip(names, paces, strict=True))
 
 
 def save(results: Sequence[LearningRun], out: Path, preset: str, paces: Sequence[Pace] = ()) -> tuple[Path, Path]:

@@ -10,7 +10,8 @@ Faults: a trial whose worker dies is retried by Ray (``max_failures``); running 
 again with the same ``OUT`` (``--resume``) reuses every finished trial (its evaluation is
 on disk) and continues an interrupted one from its run folder's checkpoint
 (:func:`armreach_core.rl.experiment.plan_run`). Results are read back from the run folders,
-one row per trial id, so no trial is counted twice.
+one row per trial id, so no trial is counted twice. A sweep on this machine alone (no cluster
+address) measures the machine's pace before and after it, for its report.
 
 Ray and Optuna are the ``ray`` extra (``pip install 'armreach[ray]'``); nothing else needs them.
 
@@ -28,6 +29,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TextIO
 
+from armreach_core.diagnostics.pace import measure_pace, save_paces
 from armreach_core.errors import ArmReachError
 from armreach_core.rl.sweep_spec import (
     SPEC_KEYS,
@@ -97,7 +99,7 @@ def run_sweep(
     record of an interrupted sweep when there is one; without it, the grid runs afresh
     (trials already evaluated in ``out`` are still reused, never run twice).
     """
-    from armreach_core.rl.sweep_report import write_report
+    from armreach_core.rl.sweep_report import PACE, write_report
 
     trials = {t.id: t for t in spec.trials()}
     out = out.resolve()
@@ -113,6 +115,9 @@ def run_sweep(
     resources = tune.with_resources(trainable, {"cpu": spec.cpus})
     storage_path = str(Path(storage).resolve()) if storage else str(out / "ray")
     experiment = os.path.join(storage_path, spec.name)
+    # on this machine alone, its pace before and after says which hour the report comes from
+    local = address is None and not os.environ.get("RAY_ADDRESS")
+    paces = [measure_pace(spec.backends)] if local else []
     t0 = time.perf_counter()
     with ray_session(address, cpus):
         if resume and tune.Tuner.can_restore(experiment):
@@ -133,8 +138,11 @@ def run_sweep(
             )
         grid = tuner.fit()
     errors = [grid[i].error for i in range(len(grid)) if grid[i].error is not None]
+    wall_seconds = time.perf_counter() - t0
+    if local:
+        save_paces(out / PACE, [*paces, measure_pace(spec.backends)])
     rows = collect(out, spec)
-    write_report(out, rows, wall_seconds=time.perf_counter() - t0)
+    write_report(out, rows, wall_seconds=wall_seconds)
     if errors:
         raise ArmReachError(
             f"{len(errors)} of {len(trials)} trials failed (first: {errors[0]}); the others are in {out}; "

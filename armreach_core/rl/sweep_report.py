@@ -1,6 +1,7 @@
 """The report of a sweep: per cell, success over seeds (IQM with a 95 % bootstrap interval),
 steps and minutes to 95 % training success, jerk; a figure of learning curves with bands;
-CSV and JSON of every trial."""
+CSV and JSON of every trial; and, for a sweep run on this machine alone, the machine's pace
+before and after it (:data:`PACE`, :mod:`armreach_core.diagnostics.pace`)."""
 
 from __future__ import annotations
 
@@ -13,8 +14,11 @@ from typing import Any
 
 import numpy as np
 
+from armreach_core.diagnostics.pace import load_paces, pace_lines
 from armreach_core.diagnostics.tables import markdown_table
 
+#: The sweep folder's record of the machine's pace before and after the sweep (a local one only).
+PACE = "pace.json"
 #: Training success (over the last WINDOW episodes) that counts as reached.
 TARGET = 0.95
 WINDOW = 100
@@ -108,6 +112,7 @@ def write_report(out: Path, rows: Sequence[Mapping[str, Any]], *, wall_seconds: 
         ),
         "",
         *_time_split(ordered),
+        *([pace_lines(paces), ""] if (paces := load_paces(out / PACE)) else []),
         "Every trial: `trials.csv`, `trials.json`; learning curves: `curves.png`.",
         "",
     ]
