@@ -2,10 +2,11 @@
 
 On a shared machine the same code runs at different speeds from one hour to the next, by up to a
 factor of two, and the engines' loop and dense arithmetic do not slow down together (on the
-2-core machine of docs/benchmarks.md, an hour that stepped the engines fast trained the paper's
-DDPG at half its best speed). A learning benchmark's seconds say little without the pace they were
-measured at, so ``armreach bench --learning`` measures it before its first run and after its last
-and writes both beside its table:
+2-core machine of docs/learning.md's paper protocol, an hour that stepped the engines at their
+fastest trained the paper's DDPG at half its best speed). A learning benchmark's seconds say
+little without the pace they were measured at, so ``armreach bench --learning`` (and a sweep run
+on this machine alone) measures it before its first run and after its last and writes both
+beside its table:
 
 * ``engine``: the bundled arm's bare engine loop on each backend, steps/s
   (:func:`~armreach_core.diagnostics.bench.bench_bare`, episodes of
