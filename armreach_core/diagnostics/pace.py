@@ -99,9 +99,8 @@ def describe(pace: Pace) -> str:
 
 
 def pace_lines(paces: Sequence[Pace]) -> str:
-    """The machine's pace under a report: before its first run and after its last."""
-    names = ("before", "after") if len(paces) == 2 else tuple(f"{i + 1}" for i in range(len(paces)))
-    return "\n".join(f"Machine pace {name}: {describe(p)}." for name, p in zip(names, paces, strict=True))
+    """The machine's pace under a report: the two paces taken before its first run and after its last."""
+    return "\n".join(f"Machine pace {name}: {describe(p)}." for name, p in zip(("before", "after"), paces, strict=True))
 
 
 def save_paces(path: Path, paces: Sequence[Pace]) -> None:

@@ -45,6 +45,7 @@ from armreach_core.rl.sweep_trials import (
     RAY_EXTRA,
     TRIAL_RECORD,
     RayUnavailableError,
+    cluster_address,
     progress_callback,
     ray_session,
     require_ray,
@@ -116,7 +117,7 @@ def run_sweep(
     storage_path = str(Path(storage).resolve()) if storage else str(out / "ray")
     experiment = os.path.join(storage_path, spec.name)
     # on this machine alone, its pace before and after says which hour the report comes from
-    local = address is None and not os.environ.get("RAY_ADDRESS")
+    local = cluster_address(address) is None
     paces = [measure_pace(spec.backends)] if local else []
     t0 = time.perf_counter()
     with ray_session(address, cpus):

@@ -24,6 +24,7 @@ __all__ = [
     "RAY_EXTRA",
     "TRIAL_RECORD",
     "RayUnavailableError",
+    "cluster_address",
     "progress_callback",
     "ray_node",
     "ray_session",
@@ -56,6 +57,11 @@ def require_ray() -> Any:
     return ray
 
 
+def cluster_address(address: str | None) -> str | None:
+    """The Ray cluster a sweep joins: ``address``, else ``RAY_ADDRESS``; None for a local Ray on this machine."""
+    return address or os.environ.get("RAY_ADDRESS") or None
+
+
 def start_ray(address: str | None, cpus: int | None = None) -> Any:
     """Connect to the cluster at ``address`` (or ``RAY_ADDRESS``), else start a local Ray with ``cpus`` CPUs.
 
@@ -75,7 +81,7 @@ def start_ray(address: str | None, cpus: int | None = None) -> Any:
     os.environ.setdefault("RAY_worker_niceness", str(os.nice(0)))
     if ray.is_initialized():
         return ray
-    address = address or os.environ.get("RAY_ADDRESS")
+    address = cluster_address(address)
     if address:
         ray.init(address=address, log_to_driver=False)
     else:
