@@ -124,9 +124,11 @@ class RobotModel(ArmKinematics):
         frames, _ = self.chain_frames(q)
         points = [np.asarray(origin) for origin, _, _ in frames] + [self.forward_kinematics(q)]
         for i, joint in enumerate(self.joints[: self.arm_dof]):
+            if joint.type != "prismatic":
+                continue
             travel = joint.upper - joint.lower
             below = sum(float(np.linalg.norm(points[k + 1] - points[k])) for k in range(i, self.arm_dof))
-            if joint.type == "prismatic" and travel > LONG_TRAVEL * below:
+            if travel > LONG_TRAVEL * below:
                 value = float(np.clip(0.0, joint.lower, joint.upper))
                 note = (
                     f"prismatic joint {joint.name!r} travels {travel:.3g} m, over {LONG_TRAVEL:g} times the "
