@@ -65,10 +65,11 @@ def test_interleaved_passes_time_the_env_the_bare_loop_and_the_engine_over_the_s
     stepping as before."""
     env = ArmReach6DOFEnv(backend=backend, max_episode_steps=50)
     try:
-        passes = interleaved_passes(env, 600, 3)
-        assert len(passes) == 3 and all(one.bare is not None and one.engine is not None for one in passes)
-        # summed over the passes, so that a hiccup of the machine in one episode cannot turn the order
-        env_s, bare_s, engine_s = (sum(getattr(one, kind) for one in passes) for kind in ("env", "bare", "engine"))
+        passes = interleaved_passes(env, 1200, 5)
+        assert len(passes) == 5 and all(one.bare is not None and one.engine is not None for one in passes)
+        # each kind's fastest pass: a hiccup of the machine (another test on the other core) lands in one
+        # kind of one pass and the margins are 8-15 % (2026-12-07), so a sum over passes can turn the order
+        env_s, bare_s, engine_s = (min(getattr(one, kind) for one in passes) for kind in ("env", "bare", "engine"))
         assert env_s > bare_s > engine_s > 0.0
         env.reset(seed=1)
         _, _, _, _, info = env.step(np.zeros(6))
@@ -79,7 +80,7 @@ def test_interleaved_passes_time_the_env_the_bare_loop_and_the_engine_over_the_s
 
 def test_bench_command_writes_json_and_table(tmp_path, capsys) -> None:
     out = tmp_path / "bench"
-    argv = ["bench", "--backends", "pybullet", "--steps", "500", "--repeats", "3", "--no-vector", "--sb3", "none"]
+    argv = ["bench", "--backends", "pybullet", "--steps", "500", "--repeats", "5", "--no-vector", "--sb3", "none"]
     assert main([*argv, "--out", str(out)]) == 0
     data = json.loads((out / "bench.json").read_text())
     (row,) = data["backends"]
