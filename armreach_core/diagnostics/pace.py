@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from armreach_core.diagnostics.bench import EPISODE_STEPS, bench_bare, best_of
+from armreach_core.threads import torch_threads
 
 #: Rows of the timed product: the paper's DDPG batch.
 DENSE_BATCH = 300
@@ -64,9 +65,7 @@ def dense_pace(products: int = 200, repeats: int = 3) -> float:
     ``repeats``); torch's thread count is as before afterwards."""
     import torch
 
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    with torch_threads(1):
         generator = torch.Generator().manual_seed(0)
         inputs = torch.rand(DENSE_BATCH, DENSE_WIDTH, generator=generator)
         weights = torch.rand(DENSE_WIDTH, DENSE_WIDTH, generator=generator)
@@ -80,8 +79,6 @@ def dense_pace(products: int = 200, repeats: int = 3) -> float:
             return time.perf_counter() - t0
 
         seconds = best_of(repeats, run)
-    finally:
-        torch.set_num_threads(before)
     return 2.0 * DENSE_BATCH * DENSE_WIDTH * DENSE_WIDTH * products / seconds / 1e9
 
 

@@ -50,9 +50,8 @@ Implemented for the SB3 learner, whose actors are PyTorch modules.
 
 from __future__ import annotations
 
-import contextlib
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -60,6 +59,7 @@ import numpy as np
 from armreach_core.rl.collection import Collector, Dataset, Rollout, episode
 from armreach_core.rl.demonstrations import DEMO_SEED, reference_controller
 from armreach_core.rl.validation import Validation
+from armreach_core.threads import torch_threads
 
 #: Seeds of the learner's rollouts start here, past any demonstration episode's.
 ROLLOUT_SEED = DEMO_SEED + 500_000
@@ -85,20 +85,6 @@ def clean_action(policy: Any, obs: Any) -> Any:
             return th.tanh(actor.mu(actor.latent_pi(features)))
         return actor(obs, deterministic=True)
     return actor(obs)
-
-
-@contextlib.contextmanager
-def torch_threads(threads: int) -> Iterator[None]:
-    """Run the block on ``threads`` torch threads (0: as many as now), the number before it after it."""
-    import torch as th
-
-    before = th.get_num_threads()
-    if threads > 0:
-        th.set_num_threads(threads)
-    try:
-        yield
-    finally:
-        th.set_num_threads(before)
 
 
 def fit(
