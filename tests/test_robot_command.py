@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -105,3 +107,16 @@ def test_the_page_says_usable_only_when_the_parity_it_ran_holds(tmp_path):
     assert holds.usable and "**Usable.** The parity check holds" in markdown(holds)
     unchecked = markdown(RobotReport(urdf="arm.urdf"))
     assert "**Usable.** (Parity not checked" in unchecked
+
+
+def test_each_warning_about_the_urdf_prints_once_per_command(tmp_path) -> None:
+    """The command reads the URDF to check it, then its env reads it again: the AL5D's five point-mass
+    links are each repaired (a warning per link) and each warning reaches the user once, not twice."""
+    from armreach_core.diagnostics.corpus import corpus_arm
+
+    urdf = corpus_arm("lynxmotion-al5d").path
+    command = [sys.executable, "-m", "armreach_core.cli", "robot", str(urdf), *FAST, "--out", str(tmp_path)]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-2000:]
+    repaired = [line for line in result.stderr.splitlines() if "is no rigid body's" in line]
+    assert len(repaired) == 5 and len(set(repaired)) == 5, repaired

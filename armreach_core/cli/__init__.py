@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from collections.abc import Sequence
 from typing import NoReturn
@@ -58,6 +59,37 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {one_line(message)} (see `{self.prog} --help`)\n")
 
 
+class _OnceToStderr(logging.Handler):
+    """Writes each armreach log record to the stderr of the moment, as Python does for a program
+    that configured no logging, but a message only once per command: a URDF is read by the command's
+    own check and again by the env it builds, and its warnings (an inertia repaired, a joint frozen)
+    would otherwise print twice or more."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.seen: set[tuple[str, int, str]] = set()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        key = (record.name, record.levelno, record.getMessage())
+        if key not in self.seen:
+            self.seen.add(key)
+            sys.stderr.write(self.format(record) + "\n")
+
+
+_ONCE = _OnceToStderr()
+
+
+def _log_once() -> None:
+    """Route armreach's warnings through :data:`_ONCE`, afresh for this command, unless the program
+    that called :func:`main` configured logging itself (its handlers then get every record)."""
+    _ONCE.seen.clear()
+    logger = logging.getLogger("armreach")
+    if logging.getLogger().handlers:
+        logger.removeHandler(_ONCE)
+    elif _ONCE not in logger.handlers:
+        logger.addHandler(_ONCE)
+
+
 def one_line(message: str) -> str:
     """``message`` on one line: its lines joined, blank lines and ``^`` pointer lines left out."""
     lines = [line.strip() for line in message.splitlines()]
@@ -84,6 +116,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if unknown:  # named by the sub-command, whose --help lists what it takes
         args.command_parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     args.command_line = ["armreach", *(sys.argv[1:] if argv is None else argv)]
+    _log_once()
     try:
         status: int = args.run(args)
     except ArmReachError as exc:
