@@ -58,6 +58,7 @@ def test_engine_timing_runs_the_physics_of_env_steps_and_counts_part_of_it(backe
     assert 0.0 < inside < whole
 
 
+@pytest.mark.alone  # it times the machine
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_interleaved_passes_time_the_env_the_bare_loop_and_the_engine_over_the_same_episodes(backend: str) -> None:
     """Each pass times every episode three ways, one after another: the env's steps cost the most,
@@ -78,6 +79,7 @@ def test_interleaved_passes_time_the_env_the_bare_loop_and_the_engine_over_the_s
         env.close()
 
 
+@pytest.mark.alone  # its ratios time the machine
 def test_bench_command_writes_json_and_table(tmp_path, capsys) -> None:
     out = tmp_path / "bench"
     argv = ["bench", "--backends", "pybullet", "--steps", "500", "--repeats", "5", "--no-vector", "--sb3", "none"]
