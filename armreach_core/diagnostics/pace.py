@@ -13,12 +13,15 @@ beside its table:
   :data:`~armreach_core.diagnostics.bench.EPISODE_STEPS` steps), what env steps follow;
 * ``dense``: float32 GFLOP/s of one dense layer's product, a batch of :data:`DENSE_BATCH`
   through :data:`DENSE_WIDTH` x :data:`DENSE_WIDTH` weights (the paper's networks and batch) on one
-  torch thread, what a learner's updates follow.
+  torch thread, what a learner's updates follow;
+* ``cpu``: the processor the machine reports (:func:`cpu_name`), since a machine of the same
+  description can be lent on another host from one day to the next.
 """
 
 from __future__ import annotations
 
 import json
+import platform
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -44,9 +47,32 @@ class Pace:
     engine: dict[str, float]
     #: GFLOP/s of the dense layer's product on one thread.
     dense: float
+    #: The processor, as :func:`cpu_name` names it ("" where it was not recorded).
+    cpu: str = ""
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+
+def cpu_name(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
+    """The processor's model name with its family and model numbers (``AMD EPYC, family 25, model 17``):
+    a virtual machine often shows only the vendor's family name, and the numbers tell its generations
+    apart. Where the system has no ``cpuinfo``, what :func:`platform.processor` says."""
+    fields: dict[str, str] = {}
+    try:
+        for line in cpuinfo.read_text(encoding="utf-8", errors="replace").splitlines():
+            key, sep, value = line.partition(":")
+            if not sep:
+                if fields:
+                    break  # the first processor's block is enough
+                continue
+            fields.setdefault(key.strip(), value.strip())
+    except OSError:
+        pass
+    name = fields.get("model name") or platform.processor() or platform.machine() or "unknown"
+    labels = (("cpu family", "family"), ("model", "model"))
+    numbers = [f"{label} {fields[key]}" for key, label in labels if key in fields]
+    return ", ".join([name, *numbers])
 
 
 def engine_pace(backend: str, steps: int = 2000, repeats: int = 3) -> float:
@@ -86,13 +112,14 @@ def measure_pace(backends: Sequence[str], steps: int = 2000, repeats: int = 3) -
     """Both speeds now, the engine loop on each of ``backends``."""
     at = datetime.now(timezone.utc).isoformat(timespec="seconds")
     engine = {backend: engine_pace(backend, steps, repeats) for backend in backends}
-    return Pace(at, engine, dense_pace(repeats=repeats))
+    return Pace(at, engine, dense_pace(repeats=repeats), cpu_name())
 
 
 def describe(pace: Pace) -> str:
-    """One line: when, each backend's bare engine loop steps/s, and the dense layer's GFLOP/s."""
+    """One line: when, each backend's bare engine loop steps/s, the dense layer's GFLOP/s and the CPU."""
     engines = ", ".join(f"{name} {rate:,.0f}" for name, rate in pace.engine.items())
-    return f"{pace.at}: bare engine loop {engines} steps/s; dense layer {pace.dense:,.0f} GFLOP/s (one thread)"
+    cpu = f"; CPU {pace.cpu}" if pace.cpu else ""
+    return f"{pace.at}: bare engine loop {engines} steps/s; dense layer {pace.dense:,.0f} GFLOP/s (one thread){cpu}"
 
 
 def pace_lines(paces: Sequence[Pace]) -> str:
@@ -113,4 +140,5 @@ def load_paces(path: Path) -> list[Pace]:
 
 def pace_from(data: dict[str, Any]) -> Pace:
     """A :class:`Pace` read back from :meth:`Pace.as_dict`."""
-    return Pace(str(data["at"]), {str(k): float(v) for k, v in data["engine"].items()}, float(data["dense"]))
+    engine = {str(k): float(v) for k, v in data["engine"].items()}
+    return Pace(str(data["at"]), engine, float(data["dense"]), str(data.get("cpu", "")))  # no cpu before 2026-12-07
