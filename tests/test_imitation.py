@@ -277,7 +277,8 @@ def test_a_fit_on_more_threads_is_repeatable_and_gives_the_thread_count_back() -
     from stable_baselines3 import SAC
 
     from armreach_core.rl.collection import Dataset
-    from armreach_core.rl.imitation import fit, torch_threads
+    from armreach_core.rl.imitation import fit
+    from armreach_core.threads import torch_threads
 
     env = ArmEnv("reach", max_episode_steps=40)
     rng = np.random.default_rng(0)

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import sys
-from collections.abc import Sequence
-from typing import NoReturn
+from collections.abc import Iterator, Sequence
+from typing import NoReturn, TextIO
 
 from armreach_core.cli import (
     bench,
@@ -59,35 +60,44 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {one_line(message)} (see `{self.prog} --help`)\n")
 
 
-class _OnceToStderr(logging.Handler):
-    """Writes each armreach log record to the stderr of the moment, as Python does for a program
-    that configured no logging, but a message only once per command: a URDF is read by the command's
-    own check and again by the env it builds, and its warnings (an inertia repaired, a joint frozen)
-    would otherwise print twice or more."""
+class _OnceToStderr(logging.StreamHandler):  # type: ignore[type-arg]
+    """Python's handler for a program that configured no logging (the stderr of the moment, each
+    message as it is), except that it writes a message only once: a command reads the URDF to check
+    it and its env reads it again, and each warning about the arm (an inertia repaired, a joint
+    frozen) would otherwise print twice or more."""
 
     def __init__(self) -> None:
-        super().__init__(logging.WARNING)
+        logging.Handler.__init__(self, logging.WARNING)  # as logging's own: no stream of its own to keep
         self.seen: set[tuple[str, int, str]] = set()
 
+    @property
+    def stream(self) -> TextIO:
+        return sys.stderr
+
     def emit(self, record: logging.LogRecord) -> None:
-        key = (record.name, record.levelno, record.getMessage())
+        try:
+            key = (record.name, record.levelno, record.getMessage())
+        except Exception:  # a malformed call: reported as logging reports it, not raised into the caller
+            self.handleError(record)
+            return
         if key not in self.seen:
             self.seen.add(key)
-            sys.stderr.write(self.format(record) + "\n")
+            super().emit(record)
 
 
-_ONCE = _OnceToStderr()
-
-
-def _log_once() -> None:
-    """Route armreach's warnings through :data:`_ONCE`, afresh for this command, unless the program
-    that called :func:`main` configured logging itself (its handlers then get every record)."""
-    _ONCE.seen.clear()
-    logger = logging.getLogger("armreach")
+@contextlib.contextmanager
+def _warnings_once() -> Iterator[None]:
+    """armreach's warnings, each once, for the length of one command in this process, unless the
+    program that called :func:`main` configured logging itself (its handlers then get every record)."""
     if logging.getLogger().handlers:
-        logger.removeHandler(_ONCE)
-    elif _ONCE not in logger.handlers:
-        logger.addHandler(_ONCE)
+        yield
+        return
+    handler, logger = _OnceToStderr(), logging.getLogger("armreach")
+    logger.addHandler(handler)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
 
 
 def one_line(message: str) -> str:
@@ -116,9 +126,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if unknown:  # named by the sub-command, whose --help lists what it takes
         args.command_parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     args.command_line = ["armreach", *(sys.argv[1:] if argv is None else argv)]
-    _log_once()
     try:
-        status: int = args.run(args)
+        with _warnings_once():
+            status: int = args.run(args)
     except ArmReachError as exc:
         print(f"armreach: error: {one_line(str(exc))}", file=sys.stderr)
         return 2

@@ -64,7 +64,7 @@ from armreach_core.threads import torch_threads
 #: Seeds of the learner's rollouts start here, past any demonstration episode's.
 ROLLOUT_SEED = DEMO_SEED + 500_000
 
-__all__ = ["ROLLOUT_SEED", "Dataset", "episode", "fit", "imitate", "torch_threads"]
+__all__ = ["ROLLOUT_SEED", "Dataset", "episode", "fit", "imitate"]
 
 
 def clean_action(policy: Any, obs: Any) -> Any:
