@@ -1,4 +1,4 @@
-"""The machine's pace: the bundled arm's engine loop, one thread's dense arithmetic, the processor."""
+"""The machine's pace (the bundled arm's engine loop, one thread's dense arithmetic) and its processor."""
 
 from __future__ import annotations
 
@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from armreach_core.diagnostics.pace import cpu_name, dense_pace, measure_pace
+from armreach_core.diagnostics.machine import cpu_count, cpu_name, machine
+from armreach_core.diagnostics.pace import dense_pace, measure_pace
 from tests.conftest import BACKENDS
 
 pytest.importorskip("torch")
@@ -38,3 +39,8 @@ def test_the_pace_names_the_first_processor_with_its_family_and_model(tmp_path: 
     assert cpu_name(cpuinfo) == "AMD EPYC, family 25, model 17"
     # a system without cpuinfo (or one that names no model) still gets a name
     assert cpu_name(tmp_path / "none") != ""
+
+
+def test_the_machine_line_names_the_processor_and_the_cores_this_process_may_use() -> None:
+    line = machine()
+    assert f"({cpu_name()}), {cpu_count()} CPU cores, Python " in line and cpu_count() >= 1

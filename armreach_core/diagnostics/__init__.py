@@ -2,7 +2,8 @@
 
 - :mod:`.bench`, :mod:`.soak`: env speed and memory over time; :mod:`.installed`: which
   registered backends can run here; :mod:`.pace`: how fast the machine runs at a moment
-  (the engine loop and dense arithmetic), written beside timings that follow it.
+  (the engine loop and dense arithmetic), written beside timings that follow it;
+  :mod:`.machine`: the processor, cores and Python a figure was measured on.
 - :mod:`.parity`: the two engines driven alike and compared, from the parts
   :mod:`.parity_sequences` (driving one backend), :mod:`.parity_gaps` (the comparison
   and its tolerances) and :mod:`.parity_report` (Markdown, plot, files).

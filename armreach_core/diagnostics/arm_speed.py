@@ -16,8 +16,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from armreach_core.diagnostics.bench import EPISODE_STEPS, bench_env_step, machine
+from armreach_core.diagnostics.bench import EPISODE_STEPS, bench_env_step
 from armreach_core.diagnostics.corpus import CorpusArm, for_each_corpus_arm
+from armreach_core.diagnostics.machine import machine
 from armreach_core.diagnostics.tables import markdown_table
 from armreach_core.env import ArmEnv
 

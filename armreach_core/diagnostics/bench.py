@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import gc
 import json
-import os
-import platform
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -22,6 +20,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.diagnostics.machine import machine
 from armreach_core.diagnostics.tables import markdown_table
 from armreach_core.env import ArmEnv
 from armreach_core.errors import ArmReachError
@@ -297,11 +296,6 @@ def run_bench(
                     log(f"{name}: {key} training (paper preset) {result.training_steps_per_s[key]:,.0f} steps/s")
         results.append(result)
     return results
-
-
-def machine() -> str:
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return f"{platform.machine()}, {cores} CPU cores, Python {platform.python_version()}, {platform.system()}"
 
 
 def to_json(results: list[BackendBench]) -> dict[str, Any]:

@@ -22,7 +22,6 @@ beside its table:
 from __future__ import annotations
 
 import json
-import platform
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -31,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from armreach_core.diagnostics.bench import EPISODE_STEPS, bench_bare, best_of
+from armreach_core.diagnostics.machine import cpu_name
 from armreach_core.threads import torch_threads
 
 #: Rows of the timed product: the paper's DDPG batch.
@@ -53,27 +53,6 @@ class Pace:
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
-
-
-def cpu_name(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
-    """The processor's model name with its family and model numbers (``AMD EPYC, family 25, model 17``):
-    a virtual machine often shows only the vendor's family name, and the numbers tell its generations
-    apart. Where the system has no ``cpuinfo``, what :func:`platform.processor` says."""
-    fields: dict[str, str] = {}
-    try:
-        for line in cpuinfo.read_text(encoding="utf-8", errors="replace").splitlines():
-            key, sep, value = line.partition(":")
-            if not sep:
-                if fields:
-                    break  # the first processor's block is enough
-                continue
-            fields.setdefault(key.strip(), value.strip())
-    except OSError:
-        pass
-    name = fields.get("model name") or platform.processor() or platform.machine() or "unknown"
-    labels = (("cpu family", "family"), ("model", "model"))
-    numbers = [f"{label} {fields[key]}" for key, label in labels if key in fields]
-    return ", ".join([name, *numbers])
 
 
 def engine_pace(backend: str, steps: int = 2000, repeats: int = 3) -> float:

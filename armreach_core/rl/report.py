@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import platform
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.diagnostics.machine import machine
 from armreach_core.diagnostics.tables import markdown_table
 from armreach_core.env import ArmEnv
 from armreach_core.rl import runs
@@ -54,7 +54,7 @@ def write_report(
         f"Backend {backend}; {seeds} seed(s) per agent, mean ± std over seeds; {episodes} evaluation episodes "
         f"per seed (the paper's task: 5 cm success radius, {limit}-step limit, joint-limit violations end the "
         "episode, reward −d³ + 10; episode `i` seeded `10000 + i` for every agent). "
-        f"Machine: {platform.machine()}, {platform.python_version()}, {_cpu_count()} CPU cores.",
+        f"Machine: {machine()}.",
         "",
         "## Time to success",
         "",
@@ -248,12 +248,6 @@ def _stg(r: ContenderResult) -> str:
 
 def _jerk(r: ContenderResult) -> str:
     return MeanStd.of([s["jerk_mean"] for s in r.summaries if s["success_rate"] > 0]).fmt(2)
-
-
-def _cpu_count() -> int:
-    import os
-
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 def warm_up() -> None:
