@@ -41,7 +41,7 @@ DENSE_WIDTH = 256
 
 @dataclass(frozen=True)
 class Pace:
-    """The two speeds at ``at`` (UTC, ISO 8601)."""
+    """The two speeds at ``at`` (UTC, ISO 8601), and the processor they were measured on."""
 
     at: str
     #: Bare engine loop steps/s of the bundled arm, per backend.
