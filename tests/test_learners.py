@@ -119,17 +119,42 @@ def test_xla_gets_one_thread_like_torch_unless_the_user_set_it(monkeypatch: pyte
 import importlib, os
 from armreach_core.rl import learners
 learners.configure_xla(1)
-print(os.environ["XLA_FLAGS"])
+learners.configure_xla(2)  # a run's own count, set before JAX starts, replaces the default
+print(os.environ["XLA_FLAGS"], os.environ["PJRT_NPROC"])
 os.environ["XLA_FLAGS"] = "--xla_cpu_multi_thread_eigen=true"
+os.environ["PJRT_NPROC"] = "3"
 importlib.reload(learners)
 learners.configure_xla(4)
-print(os.environ["XLA_FLAGS"])
+print(os.environ["XLA_FLAGS"], os.environ["PJRT_NPROC"])
 """
-    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "PJRT_NPROC", "NPROC")}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
     ours, users = out.splitlines()
-    assert ours == "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
-    assert users == "--xla_cpu_multi_thread_eigen=true"
+    assert ours == "--xla_cpu_multi_thread_eigen=true intra_op_parallelism_threads=2 2"
+    assert users == "--xla_cpu_multi_thread_eigen=true 3"
+
+
+def test_xla_computes_on_the_threads_it_was_given() -> None:
+    # XLA's own flags do not size JAX's CPU pool: before PJRT_NPROC was set, "one thread" ran a
+    # product on both cores of a 2-core machine (CPU time 1.96 times the wall-clock).
+    pytest.importorskip("jax")
+    code = """
+import os, time
+from armreach_core.rl import learners
+learners.configure_xla(1)
+import jax, jax.numpy as jnp
+a = jnp.ones((1024, 1024), jnp.float32)
+product = jax.jit(lambda a: a @ a)
+product(a).block_until_ready()
+wall, cpu = time.perf_counter(), os.times()
+while time.perf_counter() - wall < 1.0:
+    product(a).block_until_ready()
+now = os.times()
+print((now.user - cpu.user + now.system - cpu.system) / (time.perf_counter() - wall))
+"""
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "PJRT_NPROC", "NPROC")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True).stdout
+    assert float(out) < 1.3  # one core busy (two where the pool had every core)
 
 
 def _monitor(run_dir: Path) -> list[dict[str, str]]:

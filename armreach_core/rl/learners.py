@@ -81,6 +81,10 @@ INSTALL = {
 
 #: Whether the user set ``XLA_FLAGS`` before armreach ran (then armreach leaves it alone).
 _USER_XLA_FLAGS = "XLA_FLAGS" in os.environ
+#: The variables that size XLA's CPU thread pool (its flags above do not: JAX's CPU client reads these).
+XLA_POOL_VARIABLES = ("PJRT_NPROC", "NPROC")
+#: Whether the user set one of them before armreach ran.
+_USER_XLA_POOL = any(name in os.environ for name in XLA_POOL_VARIABLES)
 
 
 def default_learner(algo: str) -> str:
@@ -245,10 +249,14 @@ def configure_xla(threads: int = 1) -> None:
 
     The threads take effect only before JAX is imported (XLA reads its flags once): a run's
     ``check_settings`` sets it from the run's thread count before anything imports SBX.
-    One thread by default, as for torch.
+    One thread by default, as for torch. JAX's CPU client sizes its pool from ``PJRT_NPROC``
+    (every core without it, whatever the flags say), so that is set too, unless the user set
+    it or ``NPROC``.
     """
     use_xla_cache()
     if not _USER_XLA_FLAGS and "jax" not in sys.modules:
         os.environ["XLA_FLAGS"] = (
             f"--xla_cpu_multi_thread_eigen={'true' if threads > 1 else 'false'} intra_op_parallelism_threads={threads}"
         )
+        if not _USER_XLA_POOL:
+            os.environ["PJRT_NPROC"] = str(threads)
