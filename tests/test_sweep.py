@@ -241,6 +241,19 @@ def test_sweep_command_errors_come_before_ray(
     assert re.fullmatch(rf"armreach: error: .*{message}.*\n", capsys.readouterr().err)
 
 
+def test_a_trial_larger_than_the_local_ray_is_refused_before_ray(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import armreach_core.rl.sweep as sweep
+
+    monkeypatch.setattr(sweep, "run_sweep", lambda *a, **k: pytest.fail("Ray must not start"))
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    spec_path = _spec(tmp_path, algos=["ppo"], cpus=2)
+    assert main(["sweep", str(spec_path), "--out", str(tmp_path / "out"), "--cpus", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "asks for 2 CPUs per trial and the local Ray has 1; lower the spec's cpus to 1" in err
+
+
 def test_report_only_without_trials_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     spec_path = _spec(tmp_path, algos=["ppo"])
     assert main(["sweep", str(spec_path), "--out", str(tmp_path / "empty"), "--report-only"]) == 2

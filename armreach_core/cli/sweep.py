@@ -42,6 +42,7 @@ def run(args: argparse.Namespace) -> int:
     out: Path = args.out or Path("runs") / f"sweep-{spec.name}"
     if args.cpus is not None and args.cpus < 1:
         raise ConfigError(f"--cpus must be >= 1, got {args.cpus}")
+    _check_fits(spec.cpus, args)
     if args.report_only:
         if not (out / "runs").is_dir():
             raise ConfigError(f"{out} holds no trials of a sweep (no runs folder); run the sweep first")
@@ -60,3 +61,20 @@ def run(args: argparse.Namespace) -> int:
     print(f"{len(rows)} trials; report: {out / 'report.md'}")
     print((out / "report.md").read_text(encoding="utf-8"))
     return 0 if len(rows) == total else 1
+
+
+def _check_fits(trial_cpus: int, args: argparse.Namespace) -> None:
+    """ConfigError where a local Ray could never start a trial: it would wait for CPUs it does not have."""
+    import os
+
+    from armreach_core.errors import ConfigError
+    from armreach_core.rl.sweep_trials import cluster_address
+
+    if args.report_only or cluster_address(args.address) is not None:
+        return
+    cores = args.cpus or os.cpu_count() or 1
+    if trial_cpus > cores:
+        raise ConfigError(
+            f"the spec asks for {trial_cpus} CPUs per trial and the local Ray has {cores}; "
+            f"lower the spec's cpus to {cores} or less, or run on a cluster with --address"
+        )

@@ -14,7 +14,8 @@ beside its table:
 * ``dense``: float32 GFLOP/s of one dense layer's product, a batch of :data:`DENSE_BATCH`
   through :data:`DENSE_WIDTH` x :data:`DENSE_WIDTH` weights (the paper's networks and batch) on one
   torch thread, what a learner's updates follow (torch stands in for XLA too, which SBX's
-  learners run on: the same product ran at 98 GFLOP/s in torch and 135 in XLA the same minute);
+  learners run on: on one thread the same product ran at 102 GFLOP/s in torch and 106 in XLA
+  the same minute);
 * ``cpu``: the processor the machine reports (:func:`cpu_name`), since a machine of the same
   description can be lent on another host from one day to the next.
 """
