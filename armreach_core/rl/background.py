@@ -100,7 +100,7 @@ def _worker(remote: Connection, parent: Connection, payload: CloudpickleWrapper)
     import torch
 
     torch.set_num_threads(1)  # as training's policy: the same arithmetic, the same actions
-    # (XLA's threads: from XLA_FLAGS, which this process inherits as training set it)
+    # (XLA's threads: from XLA_FLAGS and PJRT_NPROC, which this process inherits as training set them)
     make_env, spec = payload.var
     envs: list[Any] = []
     broken: BaseException | None = None

@@ -55,7 +55,7 @@ def freeze_joints(root: Any, frozen: Mapping[str, float]) -> tuple[str, ...]:
             )
     said = []
     for name, value in frozen.items():
-        unit = "m" if joints[name].get("type") == "prismatic" else "rad"
+        unit = _unit(joints[name])  # before the joint is made fixed
         _freeze(joints[name], value)
         said.append(f"{name!r} frozen at {value:g} {unit} (frozen_joints): fixed for the kinematics and the engines")
     return tuple(said)
@@ -69,11 +69,15 @@ def _check_value(joint: Any, name: str, value: float) -> None:
         return
     lower, upper = (float(limit.get(bound) or 0.0) for bound in ("lower", "upper"))  # a left-out bound is 0
     if not lower <= value <= upper:
-        unit = "m" if joint.get("type") == "prismatic" else "rad"
         raise URDFError(
-            f"frozen_joints gives joint {name!r} {value:g} {unit}, outside its limits [{lower:g}, {upper:g}]; "
+            f"frozen_joints gives joint {name!r} {value:g} {_unit(joint)}, outside its limits [{lower:g}, {upper:g}]; "
             "give a value within them"
         )
+
+
+def _unit(joint: Any) -> str:
+    """The unit of a joint's value: metres along a prismatic joint, radians about any other."""
+    return "m" if joint.get("type") == "prismatic" else "rad"
 
 
 def _freeze(joint: Any, value: float) -> None:
