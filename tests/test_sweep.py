@@ -254,6 +254,23 @@ def test_a_trial_larger_than_the_local_ray_is_refused_before_ray(
     assert "asks for 2 CPUs per trial and the local Ray has 1; lower the spec's cpus to 1" in err
 
 
+def test_run_sweep_refuses_a_trial_larger_than_the_local_ray_before_writing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A program calling ``run_sweep`` itself gets the command's error, not a Ray that waits forever."""
+    import armreach_core.rl.sweep as sweep
+
+    monkeypatch.setattr(sweep, "ray_session", lambda *a, **k: pytest.fail("Ray must not start"))
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    spec = load_spec(_spec(tmp_path, algos=["ppo"], cpus=3))
+    with pytest.raises(ConfigError, match="asks for 3 CPUs per trial and the local Ray has 2; lower the spec's cpus"):
+        sweep.run_sweep(spec, tmp_path / "out", cpus=2)
+    assert not (tmp_path / "out").exists()
+    # on a cluster the autoscaler decides: no check (here Ray would start, and is refused by the stub)
+    with pytest.raises(pytest.fail.Exception, match="Ray must not start"):
+        sweep.run_sweep(spec, tmp_path / "cluster", address="head:6379", cpus=2)
+
+
 def test_report_only_without_trials_says_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     spec_path = _spec(tmp_path, algos=["ppo"])
     assert main(["sweep", str(spec_path), "--out", str(tmp_path / "empty"), "--report-only"]) == 2

@@ -36,13 +36,13 @@ def run(args: argparse.Namespace) -> int:
     from armreach_core.errors import ConfigError
     from armreach_core.rl.sweep import collect, load_spec, missing_trials, run_sweep
     from armreach_core.rl.sweep_report import write_report
+    from armreach_core.rl.sweep_trials import check_fits
 
     check_out(args.out)
     spec = load_spec(args.spec)
     out: Path = args.out or Path("runs") / f"sweep-{spec.name}"
     if args.cpus is not None and args.cpus < 1:
         raise ConfigError(f"--cpus must be >= 1, got {args.cpus}")
-    _check_fits(spec.cpus, args)
     if args.report_only:
         if not (out / "runs").is_dir():
             raise ConfigError(f"{out} holds no trials of a sweep (no runs folder); run the sweep first")
@@ -52,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
     started = (out / "runs").is_dir() and any((out / "runs").iterdir())
     if started and not args.resume:
         raise ConfigError(f"{out} already holds trials of a sweep; finish it with --resume, or choose another --out")
+    check_fits(spec.cpus, args.address, args.cpus)  # before it says it runs them
     todo = missing_trials(out, spec)
     total = len(spec.trials())
     print(f"{total - len(todo)} of {total} trials finished; running {len(todo)} on Ray", file=sys.stderr)
@@ -61,20 +62,3 @@ def run(args: argparse.Namespace) -> int:
     print(f"{len(rows)} trials; report: {out / 'report.md'}")
     print((out / "report.md").read_text(encoding="utf-8"))
     return 0 if len(rows) == total else 1
-
-
-def _check_fits(trial_cpus: int, args: argparse.Namespace) -> None:
-    """ConfigError where a local Ray could never start a trial: it would wait for CPUs it does not have."""
-    import os
-
-    from armreach_core.errors import ConfigError
-    from armreach_core.rl.sweep_trials import cluster_address
-
-    if args.report_only or cluster_address(args.address) is not None:
-        return
-    cores = args.cpus or os.cpu_count() or 1
-    if trial_cpus > cores:
-        raise ConfigError(
-            f"the spec asks for {trial_cpus} CPUs per trial and the local Ray has {cores}; "
-            f"lower the spec's cpus to {cores} or less, or run on a cluster with --address"
-        )

@@ -45,6 +45,7 @@ from armreach_core.rl.sweep_trials import (
     RAY_EXTRA,
     TRIAL_RECORD,
     RayUnavailableError,
+    check_fits,
     cluster_address,
     progress_callback,
     ray_session,
@@ -98,10 +99,12 @@ def run_sweep(
     ``storage``: where Ray keeps the experiment's state (default ``out/ray``; on a
     cluster, a path every node reaches, like ``out`` itself). ``resume`` restores Ray's
     record of an interrupted sweep when there is one; without it, the grid runs afresh
-    (trials already evaluated in ``out`` are still reused, never run twice).
+    (trials already evaluated in ``out`` are still reused, never run twice). A trial larger
+    than the local Ray is a ConfigError before anything is written.
     """
     from armreach_core.rl.sweep_report import PACE, write_report
 
+    check_fits(spec.cpus, address, cpus)
     trials = {t.id: t for t in spec.trials()}
     out = out.resolve()
     out.mkdir(parents=True, exist_ok=True)

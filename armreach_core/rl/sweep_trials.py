@@ -24,7 +24,9 @@ __all__ = [
     "RAY_EXTRA",
     "TRIAL_RECORD",
     "RayUnavailableError",
+    "check_fits",
     "cluster_address",
+    "local_cpus",
     "progress_callback",
     "ray_node",
     "ray_session",
@@ -62,6 +64,28 @@ def cluster_address(address: str | None) -> str | None:
     return address or os.environ.get("RAY_ADDRESS") or None
 
 
+def local_cpus(cpus: int | None) -> int:
+    """The CPUs of a local Ray started with ``cpus``: that number, else every core of this machine."""
+    return cpus or os.cpu_count() or 1
+
+
+def check_fits(trial_cpus: int, address: str | None, cpus: int | None) -> None:
+    """ConfigError where a local Ray could never start a trial of ``trial_cpus``: it would wait forever.
+
+    On a cluster (``address`` or ``RAY_ADDRESS``) Ray's autoscaler decides; nothing is checked.
+    """
+    from armreach_core.errors import ConfigError
+
+    if cluster_address(address) is not None:
+        return
+    cores = local_cpus(cpus)
+    if trial_cpus > cores:
+        raise ConfigError(
+            f"the spec asks for {trial_cpus} CPUs per trial and the local Ray has {cores}; "
+            f"lower the spec's cpus to {cores} or less, or run on a cluster with --address"
+        )
+
+
 def start_ray(address: str | None, cpus: int | None = None) -> Any:
     """Connect to the cluster at ``address`` (or ``RAY_ADDRESS``), else start a local Ray with ``cpus`` CPUs.
 
@@ -85,7 +109,7 @@ def start_ray(address: str | None, cpus: int | None = None) -> Any:
     if address:
         ray.init(address=address, log_to_driver=False)
     else:
-        ray.init(address="local", num_cpus=cpus or os.cpu_count() or 1, include_dashboard=False, log_to_driver=False)
+        ray.init(address="local", num_cpus=local_cpus(cpus), include_dashboard=False, log_to_driver=False)
     return ray
 
 
