@@ -375,6 +375,12 @@ def test_imitation_that_passes_a_held_out_evaluation_ends_the_run_there(tmp_path
     assert rows[-1]["successes"] >= 3 and {row["timesteps"] for row in rows} == {0}
     assert stopped_early(run_dir)
     assert json.loads((run_dir / runs.PROGRESS).read_text())["timesteps"] == 0
+    # the judges' time is the evaluations' part of the run, not imitation's; the parts still add up
+    timing = read_timing(run_dir)
+    judging = sum(stage["held_out"]["seconds"] for stage in stages)
+    assert judging <= timing["validation"] <= judging + 1.0
+    assert timing["imitation"] >= sum(stage["seconds"] for stage in stages) - 0.05
+    assert sum(timing[part] for part in PARTS) == pytest.approx(timing["total"], abs=0.01)
 
 
 def test_imitation_that_fails_its_evaluations_runs_every_round_then_reinforcement(tmp_path: Path) -> None:

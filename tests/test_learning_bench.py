@@ -128,7 +128,10 @@ def test_bench_arms_name_the_rows_and_the_commands(tmp_path: Path) -> None:
     table = to_markdown(rows)
     assert table.splitlines()[0].startswith("| arm | backend |") and "| so101 | pybullet | sac | 1/1 | 50.0 |" in table
     assert "imitation" not in table  # runs that do not imitate do not show the part
-    imitating = LearningRun("pybullet", "sac", 0, 20.0, 0, True, 0.98, {"imitation": 15.0, "setup": 1.0, "start": 4.0})
+    parts = {"imitation": 15.0, "setup": 1.0, "start": 4.0}
+    imitating = LearningRun("pybullet", "sac", 0, 20.0, 0, True, 0.98, parts, "so101", imitation_steps=12_345)
+    # imitation's share, and its env steps in the column (a run that imitates took them, not none)
+    assert "| so101 | pybullet | sac | 1/1 | 20.0 | 12,345 | 98 % |" in to_markdown(summarize([imitating]))
     assert "learner 0 / imitation 75 / start 25 %" in to_markdown(summarize([imitating]))
     bundled = to_markdown(summarize([_run_record("ppo", 0, 30.0, True)]))
     assert bundled.splitlines()[0].startswith("| backend |")  # no arm column when every run is on the bundled arm

@@ -10,7 +10,8 @@ then evaluated on 100 further episodes whose targets the stop rule never saw.
 
 Per algorithm and backend: how many seeds reached the threshold, the interquartile mean
 (with its bootstrap interval, :mod:`armreach_core.rl.stats`) of the command's wall-clock
-and of the env steps, the final evaluation's success, and where the time went
+and of the env steps (imitation's included, where a preset imitates), the final evaluation's
+success, and where the time went
 (:mod:`armreach_core.rl.timing`; ``start`` is the command's own start-up: imports and
 argument checks).
 
@@ -71,6 +72,13 @@ class LearningRun:
     parts: dict[str, float]
     #: The arm's name (:attr:`BenchArm.name`).
     arm: str = BUNDLED
+    #: Env steps of imitation before any reinforcement learning (``imitation.json``), where the preset imitates.
+    imitation_steps: int = 0
+
+    @property
+    def env_steps(self) -> int:
+        """Every env step the run took: imitation's and reinforcement learning's."""
+        return self.timesteps + self.imitation_steps
 
 
 def train_command(preset: str, algo: str, backend: str, seed: int, out: Path, arm: BenchArm = BenchArm()) -> list[str]:
@@ -121,7 +129,16 @@ def run_one(preset: str, algo: str, backend: str, seed: int, out: Path, arm: Ben
         float(final),
         parts,
         arm.name,
+        _imitation_steps(out),
     )
+
+
+def _imitation_steps(run_dir: Path) -> int:
+    """The env steps of a run's imitation (0 where it did not imitate)."""
+    from armreach_core.rl.runs import IMITATION
+
+    path = run_dir / IMITATION
+    return int(json.loads(path.read_text(encoding="utf-8"))["env_steps"]) if path.is_file() else 0
 
 
 def bench_learning(
@@ -158,7 +175,7 @@ def bench_learning(
                     if stream is not None:
                         state = "reached" if run.reached else "not reached"
                         print(
-                            f"{on}{algo} on {backend}, seed {seed}: {state} after {run.timesteps:,} steps, "
+                            f"{on}{algo} on {backend}, seed {seed}: {state} after {run.env_steps:,} env steps, "
                             f"{run.seconds:.1f} s; final {100 * run.final_success:.0f} %",
                             file=stream,
                         )
@@ -187,6 +204,7 @@ def summarize(results: Sequence[LearningRun]) -> list[dict[str, object]]:
                 "reached": len(reached),
                 "seconds": asdict(iqm_interval([r.seconds if r.reached else math.nan for r in runs])),
                 "timesteps": asdict(iqm_interval([r.timesteps if r.reached else math.nan for r in runs])),
+                "env_steps": asdict(iqm_interval([r.env_steps if r.reached else math.nan for r in runs])),
                 "final_success": asdict(iqm_interval([r.final_success for r in runs])),
                 "shares": shares,
             }
@@ -222,7 +240,7 @@ def to_markdown(rows: Sequence[dict[str, object]]) -> str:
             str(row["algo"]),
             f"{row['reached']}/{row['seeds']}",
             interval(row["seconds"], digits=1),
-            interval(row["timesteps"]),
+            interval(row["env_steps"]),
             interval(row["final_success"], 100.0) + " %",
             shares(row["shares"]),
         ]

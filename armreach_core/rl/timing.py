@@ -7,10 +7,12 @@ folder:
 * ``env``: inside the vectorised env's ``step`` (physics, the env's own code, the monitor);
 * ``rollout_other``: the rest of collecting experience (the policy's forward pass, action
   noise, storing transitions, callbacks);
-* ``validation``: held-out evaluations of ``until_success`` (:mod:`armreach_core.rl.validation`);
+* ``validation``: held-out evaluations of ``until_success`` (:mod:`armreach_core.rl.validation`),
+  those after imitation's fits included;
 * ``learner``: between rollouts (the gradient updates, and the learner's first JIT compilation);
 * ``imitation``: imitation before any reinforcement learning (preset key ``imitation``: the
-  reference's episodes, the fits and their held-out evaluations, :mod:`armreach_core.rl.imitation`);
+  reference's episodes and the fits, :mod:`armreach_core.rl.imitation`), its held-out evaluations
+  counted under ``validation``;
 * ``setup``: the rest of the ``train`` call (building envs and the model, checkpoints at the end).
 
 ``armreach bench --learning`` reports these shares per algorithm.
@@ -91,15 +93,25 @@ class RolloutTimer(BaseCallback):
 
 
 def split(
-    total: float, env: float, rollouts: float, between: float, validation: float, imitation: float = 0.0
+    total: float,
+    env: float,
+    rollouts: float,
+    between: float,
+    validation: float,
+    imitation: float = 0.0,
+    imitation_validation: float = 0.0,
 ) -> dict[str, float]:
-    """The parts of a ``train`` call of ``total`` seconds (see the module's docstring)."""
+    """The parts of a ``train`` call of ``total`` seconds (see the module's docstring).
+
+    ``validation``: the evaluations during reinforcement learning, which run inside its rollouts;
+    ``imitation``: imitation's seconds, ``imitation_validation`` of them its held-out evaluations.
+    """
     return {
         "env": env,
         "rollout_other": max(rollouts - env - validation, 0.0),
-        "validation": validation,
+        "validation": validation + imitation_validation,
         "learner": between,
-        "imitation": imitation,
+        "imitation": max(imitation - imitation_validation, 0.0),
         "setup": max(total - rollouts - between - imitation, 0.0),
         "total": total,
     }

@@ -122,9 +122,10 @@ def _demonstrate(config: RunConfig, model: Any, run_dir: Path) -> None:
 
 def _imitate(
     config: RunConfig, model: Any, run_dir: Path, stream: TextIO | None, train_seconds: Callable[[], float]
-) -> Validation | None:
+) -> tuple[Validation | None, float]:
     """Teach the actor the task's reference controller first (preset key ``imitation``) and record how
-    it went; the held-out evaluation that passed after a fit (preset ``until_success``), if one did."""
+    it went; the held-out evaluation that passed after a fit (preset ``until_success``), if one did,
+    and the seconds its held-out evaluations took."""
     from armreach_core.env import ArmEnv
     from armreach_core.rl.agents import env_kwargs
     from armreach_core.rl.imitation import imitate
@@ -159,7 +160,7 @@ def _imitate(
         if judge is not None:
             judge.close()
     runs.write_json(run_dir / runs.IMITATION, outcome)
-    return passed[0] if passed else None
+    return (passed[0] if passed else None), (judge.seconds if judge is not None else 0.0)
 
 
 def probe(config: RunConfig) -> LimitRoom | None:
@@ -245,7 +246,7 @@ def train(
     t0 = time.perf_counter()  # training time includes demonstrations and imitation
     imitated: Validation | None = None  # a held-out evaluation passed during imitation
     base_seconds = 0.0  # a resumed run's earlier training time, read from its checkpoint below
-    imitation_seconds = 0.0
+    imitation_seconds = imitation_judging = 0.0
 
     def train_seconds() -> float:
         return base_seconds + time.perf_counter() - t0
@@ -261,7 +262,7 @@ def train(
                 _demonstrate(config, model, run_dir)
             if "imitation" in config.settings:
                 started = time.perf_counter()
-                imitated = _imitate(config, model, run_dir, stream, train_seconds)
+                imitated, imitation_judging = _imitate(config, model, run_dir, stream, train_seconds)
                 imitation_seconds = time.perf_counter() - started
         # Written once the model exists, so that a folder with a config always has something to resume
         # or is safe to start over (see runs.new_run_dir).
@@ -322,6 +323,7 @@ def train(
             rollouts.between,
             evaluating,
             imitation_seconds,
+            imitation_judging,
         )
         write_timing(run_dir, parts, trained)
         return TrainResult(run_dir, trained, config.timesteps, signals.requested, seconds, passed, kept)

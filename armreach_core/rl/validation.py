@@ -259,20 +259,24 @@ def record(path: Path, steps: int, train_seconds: float, result: Validation) -> 
 class Judge:
     """Held-out evaluations of a model's deterministic policy in this process, each recorded as a
     row of ``path`` (a run's ``validation.csv``) at ``train_seconds()``; the ``make_env`` envs are
-    built at the first evaluation and kept for the next ones."""
+    built at the first evaluation and kept for the next ones. ``seconds``: the wall-clock of every
+    evaluation so far, building its envs included."""
 
     def __init__(
         self, spec: UntilSuccess, make_env: Callable[[], Any], path: Path, train_seconds: Callable[[], float]
     ) -> None:
         self.spec, self.make_env, self.path, self.train_seconds = spec, make_env, path, train_seconds
         self.envs: list[Any] = []
+        self.seconds = 0.0
 
     def __call__(self, model: Any, steps: int) -> Validation:
         """Evaluate ``model`` as the policy of step ``steps`` and record the result."""
+        started = time.perf_counter()
         if not self.envs:
             self.envs = [self.make_env() for _ in range(evaluation_envs(self.spec))]
         result = validate(lambda obs: model.predict(obs, deterministic=True)[0], self.envs, self.spec, lanes=BATCH)
         record(self.path, steps, self.train_seconds(), result)
+        self.seconds += time.perf_counter() - started
         return result
 
     def close(self) -> None:
