@@ -146,7 +146,7 @@ def test_the_next_rounds_episodes_run_beside_the_judge_and_are_dropped_when_it_p
     spec = {"episodes": 4, "rounds": 3, "rollouts": 3, "gradient_steps": 20, "beta": 0.5}
     outcomes = {}
 
-    def judge() -> Validation:  # passes at its second call
+    def judge(share: object) -> Validation:  # passes at its second call
         judged = sum(event.startswith("judge") for event in events)
         events.append(f"judge {judged}")
         return Validation(10, 10, judged == 1, 0.0)

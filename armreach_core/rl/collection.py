@@ -22,6 +22,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from armreach_core.diagnostics.machine import cpu_count
+from armreach_core.rl import judge_help
+from armreach_core.rl.validation import Share, Tally, UntilSuccess
+
 #: Chunks per worker: small enough to keep both cores busy to the end, large enough that sending the
 #: learner's policy with each chunk costs little.
 CHUNKS_PER_WORKER = 8
@@ -168,7 +172,7 @@ WORKER_NICENESS = 5
 _WORKER: dict[str, Any] = {}
 
 
-def _start_worker(env_kwargs: Mapping[str, Any]) -> None:
+def _start_worker(env_kwargs: Mapping[str, Any], cells: Any, evaluation_kwargs: Mapping[str, Any] | None) -> None:
     import torch as th
 
     from armreach_core.env import ArmEnv
@@ -178,6 +182,8 @@ def _start_worker(env_kwargs: Mapping[str, Any]) -> None:
     th.set_num_threads(1)
     env: Any = ArmEnv(**env_kwargs).unwrapped
     _WORKER["env"], _WORKER["demonstrator"] = env, env.task.demonstrator(env)
+    if evaluation_kwargs is not None:  # a helper of imitation's held-out judges too
+        judge_help.start_helper(cells, evaluation_kwargs)
 
 
 def _run_chunk(seeds: list[int], policy: bytes | None, beta: float, noise: float, key: tuple[int, ...]) -> Collected:
@@ -187,25 +193,49 @@ def _run_chunk(seeds: list[int], policy: bytes | None, beta: float, noise: float
     return run_seeds(_WORKER["env"], _WORKER["demonstrator"], seeds, Rollout(learner, beta, noise, key))
 
 
+def _policy_bytes(policy: Any) -> bytes:
+    import torch as th
+
+    buffer = io.BytesIO()
+    th.save(policy, buffer)
+    return buffer.getvalue()
+
+
 class Collector:
     """Runs :func:`run_seeds` here (``workers`` 1) or over a pool of ``workers`` spawned processes.
 
     ``env_kwargs`` build each worker's env (:class:`armreach_core.env.ArmEnv`); ``env`` and
-    ``demonstrator`` serve the episodes run in this process. Close it (or use it as a context
-    manager) to stop the workers.
+    ``demonstrator`` serve the episodes run in this process. With ``evaluation_kwargs`` (the
+    held-out judge's env), the workers also help judge (:meth:`share`). Close it (or use it as a
+    context manager) to stop the workers.
     """
 
-    def __init__(self, env: Any, demonstrator: Any, env_kwargs: Mapping[str, Any] | None, workers: int = 1) -> None:
+    def __init__(
+        self,
+        env: Any,
+        demonstrator: Any,
+        env_kwargs: Mapping[str, Any] | None,
+        workers: int = 1,
+        evaluation_kwargs: Mapping[str, Any] | None = None,
+    ) -> None:
         self.env, self.demonstrator, self.workers = env, demonstrator, workers
+        #: Helper tasks per shared look: one per core the training process leaves, up to ``workers``.
+        self.helpers = max(1, min(workers, cpu_count() - 1))
         self._pool: concurrent.futures.ProcessPoolExecutor | None = None
+        self._cells: Any = None  # the board of the shared looks (judge_help.board)
+        self._chunks: list[concurrent.futures.Future[Collected]] = []  # the episodes started last
         if workers > 1:
             if env_kwargs is None:
                 raise ValueError("collecting on several workers needs the env's keyword arguments")
+            context = multiprocessing.get_context("spawn")
+            helping = None if evaluation_kwargs is None else dict(evaluation_kwargs)
+            if helping is not None:
+                self._cells = judge_help.board(context)
             self._pool = concurrent.futures.ProcessPoolExecutor(
                 max_workers=workers,
-                mp_context=multiprocessing.get_context("spawn"),
+                mp_context=context,
                 initializer=_start_worker,
-                initargs=(dict(env_kwargs),),
+                initargs=(dict(env_kwargs), self._cells, helping),
             )
 
     def __enter__(self) -> Collector:
@@ -228,19 +258,34 @@ class Collector:
         one worker they run in this process when their result is asked for."""
         if self._pool is None:
             return Pending(lambda: run_seeds(self.env, self.demonstrator, seeds, rollout))
-        import torch as th
-
-        policy: bytes | None = None
-        if rollout.policy is not None:
-            buffer = io.BytesIO()
-            th.save(rollout.policy, buffer)
-            policy = buffer.getvalue()
+        policy = None if rollout.policy is None else _policy_bytes(rollout.policy)
         size = max(1, -(-len(seeds) // (self.workers * CHUNKS_PER_WORKER)))
         chunks = [list(seeds[i : i + size]) for i in range(0, len(seeds), size)]
         futures = [
             self._pool.submit(_run_chunk, chunk, policy, rollout.beta, rollout.noise, rollout.key) for chunk in chunks
         ]
+        self._chunks = futures
         return Pending(futures=futures)
+
+    def share(self, policy: Any) -> Share:
+        """How a held-out judge of ``policy`` (an SB3 policy) makes its looks' tallies: each look
+        shared with :attr:`helpers` helper tasks on the workers, started once the episodes started
+        last have ended, so as not to slow them (:mod:`armreach_core.rl.judge_help`); kept in this
+        process without workers or ``evaluation_kwargs``."""
+        pool, cells = self._pool, self._cells
+        if pool is None or cells is None:
+            return Tally
+        blob = _policy_bytes(policy)
+
+        def shared(spec: UntilSuccess) -> Tally:
+            generation, chunks = judge_help.open_look(cells), list(self._chunks)
+
+            def launch() -> list[concurrent.futures.Future[int]]:
+                return [pool.submit(judge_help.help_look, generation, spec, blob) for _ in range(self.helpers)]
+
+            return judge_help.SharedTally(cells, generation, spec, launch, lambda: all(c.done() for c in chunks))
+
+        return shared
 
 
 class Pending:

@@ -44,7 +44,9 @@ passes, the rounds left and the reinforcement learning are skipped, as an evalua
 reinforcement learning would have stopped it. The next round's episodes need only the fitted
 actor, so they start on the workers before that evaluation and run beside it (the workers
 stand back for it, :data:`~armreach_core.rl.collection.WORKER_NICENESS`); when it passes they
-are dropped. A stage's ``seconds`` are its wait for its episodes and its fit.
+are dropped. Once they end, the workers help the judge: its episodes are shared between them and
+the training process (:mod:`armreach_core.rl.judge_help`). A stage's ``seconds`` are its wait
+for its episodes and its fit.
 Implemented for the SB3 learner, whose actors are PyTorch modules.
 """
 
@@ -58,7 +60,7 @@ import numpy as np
 
 from armreach_core.rl.collection import Collector, Dataset, Rollout, episode
 from armreach_core.rl.demonstrations import DEMO_SEED, reference_controller
-from armreach_core.rl.validation import Validation
+from armreach_core.rl.validation import Share, Validation
 from armreach_core.threads import torch_threads
 
 #: Seeds of the learner's rollouts start here, past any demonstration episode's.
@@ -144,13 +146,16 @@ def imitate(
     seed: int,
     log: Callable[[str], None] | None = None,
     env_kwargs: Mapping[str, Any] | None = None,
-    judge: Callable[[], Validation] | None = None,
+    judge: Callable[[Share], Validation] | None = None,
+    evaluation_kwargs: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Teach ``model``'s actor ``env``'s reference controller (see the module docstring); what each stage did.
 
     ``env_kwargs`` build the envs of the worker processes (``workers`` above 1). ``judge``
-    evaluates the actor on held-out targets after each stage's fit (the run's ``until_success``);
-    once one passes, the stages left are not run.
+    evaluates the actor on held-out targets after each stage's fit (the run's ``until_success``),
+    making its looks' tallies with the :class:`~armreach_core.rl.validation.Share` it is given;
+    once one passes, the stages left are not run. With ``evaluation_kwargs`` (the judge's env),
+    the workers help it (:mod:`armreach_core.rl.judge_help`).
     """
     demonstrator = reference_controller(env, "imitation")
     episodes, rounds = int(spec.get("episodes", 100)), int(spec.get("rounds", 4))
@@ -174,7 +179,7 @@ def imitate(
         first = ROLLOUT_SEED + seed * 100_000 + (stage - 1) * rollouts
         return range(first, first + rollouts), Rollout(model.policy, beta**stage, 0.0, (seed, 0x1A17, stage))
 
-    with Collector(env, demonstrator, env_kwargs, workers) as collector:
+    with Collector(env, demonstrator, env_kwargs, workers, evaluation_kwargs) as collector:
         pending = collector.start(*stage_rollout(0))
         for stage in range(rounds + 1):
             t0 = time.perf_counter()
@@ -202,7 +207,7 @@ def imitate(
             }
             if stage < rounds:  # the next round needs only the fitted actor: its episodes run while the judge does
                 pending = collector.start(*stage_rollout(stage + 1))
-            held = judge() if judge is not None else None
+            held = judge(collector.share(model.policy)) if judge is not None else None
             if held is not None:
                 record["held_out"] = {
                     "episodes": held.episodes,

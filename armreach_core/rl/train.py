@@ -138,23 +138,24 @@ def _imitate(
     until = UntilSuccess.from_settings(config.settings)
     judge = None
     passed: list[Validation] = []
+    evaluation = env_kwargs(config, evaluation=True)
     if until is not None:
-        evaluation = env_kwargs(config, evaluation=True)
         judge = validation.Judge(until, lambda: ArmEnv(**evaluation), run_dir / validation.VALIDATION, train_seconds)
 
     def log(line: str) -> None:
         if stream is not None:
             print(line, file=stream, flush=True)
 
-    def judged() -> Validation:
+    def judged(share: validation.Share) -> Validation:
         assert judge is not None
-        result = judge(model, int(model.num_timesteps))
+        result = judge(model, int(model.num_timesteps), share)
         if result.passed:
             passed.append(result)
         return result
 
     try:
-        outcome = imitate(model, env.unwrapped, spec, config.seed, log, kwargs, judged if judge else None)
+        helped = evaluation if judge is not None else None
+        outcome = imitate(model, env.unwrapped, spec, config.seed, log, kwargs, judged if judge else None, helped)
     finally:
         env.close()
         if judge is not None:

@@ -128,6 +128,59 @@ class Validation:
         return self.successes / self.episodes if self.episodes else float("nan")
 
 
+class Tally:
+    """The episodes of one look at a policy, handed out and counted: episode ``k`` is the one reset
+    with ``spec.seed + k``. This one is kept in one process;
+    :class:`armreach_core.rl.judge_help.SharedTally` shares it between processes that run the
+    look's episodes together, each running those it claims."""
+
+    def __init__(self, spec: UntilSuccess) -> None:
+        self.spec = spec
+        self.allowed, self.required = spec.allowed_failures, spec.episodes - spec.allowed_failures
+        self.started = self.successes = self.failures = self.parked = 0
+
+    def claim(self) -> int | None:
+        """The next episode to run; None once every one has been claimed or the outcome is decided."""
+        if self.started >= self.spec.episodes or self.decided():
+            return None
+        self.started += 1
+        return self.started - 1
+
+    def count(self, success: bool, parked: bool = False) -> None:
+        """A claimed episode's outcome (``parked``: it had been parked)."""
+        if success:
+            self.successes += 1
+        else:
+            self.failures += 1
+        if parked:
+            self.parked -= 1
+
+    def park(self) -> None:
+        """A claimed episode is parked: it may well fail."""
+        self.parked += 1
+
+    def decided(self) -> bool:
+        """Whether the outcome is certain: too many failures to pass, or enough successes to."""
+        return self.failures > self.allowed or self.successes >= self.required
+
+    def lost(self) -> int:
+        """The failures counted so far and the episodes parked: when they are more than the failures
+        allowed, the parked ones decide."""
+        return self.failures + self.parked
+
+    def tick(self) -> None:
+        """Called at every step of a look's episodes (a shared tally starts its helpers here)."""
+
+    def settle(self) -> tuple[int, int]:
+        """Once this process has run its episodes: the episodes started and the successes, when the
+        outcome is decided or every claimed episode has ended."""
+        return self.started, self.successes
+
+
+#: Makes the tally of a look of :func:`validate` (a :class:`Tally`, or a shared one).
+Share = Callable[[UntilSuccess], Tally]
+
+
 def validate(
     policy: Callable[[Any], Any],
     envs: Sequence[Any],
@@ -135,9 +188,11 @@ def validate(
     *,
     lanes: int | None = None,
     park_after: int = PARK_AFTER,
+    share: Share = Tally,
 ) -> Validation:
-    """Evaluate ``policy`` on ``spec``'s episodes (:func:`_look`); when that passes and ``spec.confirm``
-    asks for a second look, on that many further targets, which must pass too.
+    """Evaluate ``policy`` on ``spec``'s episodes (:func:`look`); when that passes and ``spec.confirm``
+    asks for a second look, on that many further targets, which must pass too. ``share`` makes each
+    look's :class:`Tally`: a shared one runs the look's episodes with other processes.
 
     A run stops at its first evaluation that passes, so of many evaluations on the same targets the
     one that stops it is the luckiest: a policy that reaches 96 % of all targets passes 388 of 400
@@ -145,29 +200,30 @@ def validate(
     independent sample that such a pass must repeat. Its episodes and successes are added to the
     first's, so the row's success rate covers both.
     """
-    first = _look(policy, envs, spec, lanes=lanes, park_after=park_after)
+    first = look(policy, envs, share(spec), lanes=lanes, park_after=park_after)
     second = spec.second_look() if first.passed else None
     if second is None:
         return first
-    more = _look(policy, envs, second, lanes=lanes, park_after=park_after)
+    more = look(policy, envs, share(second), lanes=lanes, park_after=park_after)
     episodes, successes = first.episodes + more.episodes, first.successes + more.successes
     return Validation(episodes, successes, more.passed, first.seconds + more.seconds)
 
 
-def _look(
+def look(
     policy: Callable[[Any], Any],
     envs: Sequence[Any],
-    spec: UntilSuccess,
+    tally: Tally,
     *,
     lanes: int | None,
     park_after: int,
 ) -> Validation:
-    """Run ``policy`` (a batch of observations -> a batch of actions) for up to ``spec.episodes``
-    seeded episodes on ``envs``, stopping at the failure or the success that decides the outcome.
+    """Run ``policy`` (a batch of observations -> a batch of actions) on the seeded episodes that
+    ``tally`` hands out (up to its spec's ``episodes``) on ``envs``, until the failure or the
+    success that decides the outcome.
 
-    Episode ``i`` is reset with ``spec.seed + i`` whichever env runs it, so the outcome does not
-    depend on how episodes are scheduled: ``lanes`` of them (all of ``envs`` by default) run side
-    by side, one policy call for all. The other envs park episodes that have run
+    Episode ``k`` is reset with ``spec.seed + k`` whichever env (or process) runs it, so the
+    outcome does not depend on how episodes are scheduled: ``lanes`` of them (all of ``envs`` by
+    default) run side by side, one policy call for all. The other envs park episodes that have run
     ``park_after`` steps, the ones that may hover near their target until the time limit,
     and a fresh episode takes the lane: parked episodes are run on only when their outcomes
     could decide (as many as the failures still allowed, plus one) or nothing else is left to
@@ -178,11 +234,10 @@ def _look(
     ``spec.presume_after``, an episode that has run that many steps ends there as a failure.
     """
     t0 = time.perf_counter()
-    allowed, required = spec.allowed_failures, spec.episodes - spec.allowed_failures
+    spec = tally.spec
     width = len(envs) if lanes is None else max(1, min(lanes, len(envs)))
     spare = len(envs) - width
     presume = spec.presume_after
-    failures = successes = started = 0
     obs: list[Any] = [None] * len(envs)
     elapsed = [0] * len(envs)
     free = list(range(len(envs)))[::-1]
@@ -190,18 +245,18 @@ def _look(
     parked: list[int] = []
 
     def start() -> None:
-        nonlocal started
-        if started < spec.episodes:
+        k = tally.claim()
+        if k is not None:
             i = free.pop()
-            obs[i], _ = envs[i].reset(seed=spec.seed + started)
+            obs[i], _ = envs[i].reset(seed=spec.seed + k)
             elapsed[i] = 0
-            started += 1
             running.append(i)
 
     for _ in range(width):
         start()
-    while failures <= allowed and successes < required and (running or parked):
-        resolving = failures + len(parked) > allowed or not running
+    while (running or parked) and not tally.decided():
+        tally.tick()
+        resolving = (bool(parked) and tally.lost() > tally.allowed) or not running
         active = parked if resolving else running
         actions = policy(_stack([obs[i] for i in active]))
         for action, i in zip(actions, list(active), strict=True):
@@ -209,19 +264,18 @@ def _look(
             elapsed[i] += 1
             ended = terminated or truncated
             if ended or (presume and elapsed[i] >= presume):  # one still running there: a failure
-                if ended and info["is_success"]:
-                    successes += 1
-                else:
-                    failures += 1
+                tally.count(bool(ended and info["is_success"]), parked=resolving)
                 active.remove(i)
                 free.append(i)
-                if not resolving and failures <= allowed and successes < required:
+                if not resolving:
                     start()
             elif not resolving and elapsed[i] >= park_after and len(parked) < spare:
                 running.remove(i)
                 parked.append(i)
+                tally.park()
                 start()
-    if successes >= required:  # passed: what did not finish counts against it
+    started, successes = tally.settle()
+    if successes >= tally.required:  # passed: what did not finish counts against it
         return Validation(spec.episodes, successes, True, time.perf_counter() - t0)
     return Validation(started, successes, False, time.perf_counter() - t0)
 
@@ -269,12 +323,14 @@ class Judge:
         self.envs: list[Any] = []
         self.seconds = 0.0
 
-    def __call__(self, model: Any, steps: int) -> Validation:
-        """Evaluate ``model`` as the policy of step ``steps`` and record the result."""
+    def __call__(self, model: Any, steps: int, share: Share = Tally) -> Validation:
+        """Evaluate ``model`` as the policy of step ``steps`` and record the result; ``share`` makes
+        the tally of each look (:func:`validate`)."""
         started = time.perf_counter()
         if not self.envs:
             self.envs = [self.make_env() for _ in range(evaluation_envs(self.spec))]
-        result = validate(lambda obs: model.predict(obs, deterministic=True)[0], self.envs, self.spec, lanes=BATCH)
+        act = lambda obs: model.predict(obs, deterministic=True)[0]  # noqa: E731
+        result = validate(act, self.envs, self.spec, lanes=BATCH, share=share)
         record(self.path, steps, self.train_seconds(), result)
         self.seconds += time.perf_counter() - started
         return result
