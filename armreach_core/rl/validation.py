@@ -30,7 +30,9 @@ Cheap enough to run often:
 * it runs only once the success rate of the last 100 training episodes is within ``gate``
   of the threshold (training episodes are shorter, so they under-estimate it);
 * it runs in a worker process, on the core training leaves idle, while training goes on
-  (``background``, on by default; :mod:`armreach_core.rl.background`).
+  (``background``, on by default; :mod:`armreach_core.rl.background`); imitation's judges
+  share their episodes with the collection's workers instead (:class:`Tally`,
+  :mod:`armreach_core.rl.judge_help`).
 
 Either way, an episode that was started and not run to its end counts as a failure, so every
 evaluation's success rate is a lower bound. Counting only the finished ones would read high
