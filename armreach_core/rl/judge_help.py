@@ -78,7 +78,7 @@ class SharedTally(Tally):
         cells = self.cells
         if cells[GENERATION] != self.generation:
             return True
-        return bool(cells[FAILURES] > self.allowed or cells[SUCCESSES] >= self.required)
+        return self.decides(cells[FAILURES], cells[SUCCESSES])
 
     def claim(self) -> int | None:
         with self.cells.get_lock():

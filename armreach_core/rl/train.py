@@ -136,10 +136,10 @@ def _imitate(
         kwargs["max_episode_steps"] = int(spec["episode_steps"])
     env = ArmEnv(**kwargs)
     until = UntilSuccess.from_settings(config.settings)
-    judge = None
+    judge, helped = None, None
     passed: list[Validation] = []
-    evaluation = env_kwargs(config, evaluation=True)
     if until is not None:
+        helped = evaluation = env_kwargs(config, evaluation=True)  # the workers help the judge, in its env
         judge = validation.Judge(until, lambda: ArmEnv(**evaluation), run_dir / validation.VALIDATION, train_seconds)
 
     def log(line: str) -> None:
@@ -154,7 +154,6 @@ def _imitate(
         return result
 
     try:
-        helped = evaluation if judge is not None else None
         outcome = imitate(model, env.unwrapped, spec, config.seed, log, kwargs, judged if judge else None, helped)
     finally:
         env.close()

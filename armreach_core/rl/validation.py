@@ -163,7 +163,11 @@ class Tally:
 
     def decided(self) -> bool:
         """Whether the outcome is certain: too many failures to pass, or enough successes to."""
-        return self.failures > self.allowed or self.successes >= self.required
+        return self.decides(self.failures, self.successes)
+
+    def decides(self, failures: int, successes: int) -> bool:
+        """Whether these counts make the outcome certain."""
+        return failures > self.allowed or successes >= self.required
 
     def lost(self) -> int:
         """The failures counted so far and the episodes parked: when they are more than the failures
