@@ -89,9 +89,9 @@ def test_a_batch_s_jacobian_is_each_pose_s_with_numpy_s_cross_products_to_the_bi
 
 @pytest.mark.parametrize("arm", ["tiago-arm", "kuka-kr210"])
 def test_one_poses_kinematics_are_the_batchs_to_the_bit(arm):
-    """One joint vector takes a shorter walk of the chain than a batch (the IK reference's steps and
-    solves call it thousands of times an episode): the same products in the same order, so the
-    same numbers to the bit, through a prismatic joint (TIAGo's torso) and fixed joints on the chain."""
+    """One joint vector and a batch go through the chain's same operations in the same order (the IK
+    reference's steps and solves call it thousands of times an episode, one vector at a time), so
+    the same numbers to the bit, through a prismatic joint (TIAGo's torso) and fixed joints on the chain."""
     from armreach_core.diagnostics.corpus import corpus_arm
     from armreach_core.robot.placement import rotation
 
@@ -110,6 +110,42 @@ def test_one_poses_kinematics_are_the_batchs_to_the_bit(arm):
     angles = np.random.default_rng(6).uniform(-4, 4, 10)
     batch = rotation(axis, angles)
     assert all(np.array_equal(rotation(axis, angle), batch[k]) for k, angle in enumerate(angles))
+
+
+@pytest.mark.parametrize("arm", ["tiago-arm", "vega-1u-left", "ur5"])
+def test_the_compiled_chain_is_the_trees_walk(arm):
+    """The chain to the end effector folds its fixed joints and multiplies down it in a parallel
+    prefix (armreach_core/robot/chain.py); the tree's walk goes joint by joint. On a prismatic
+    torso (TIAGo), a lift and a folded torso (the Vega) and a placed, turned base (a UR5), they
+    agree to rounding on every actuated joint's frame and child link and on the end effector, and
+    the Jacobian is the end effector's derivative."""
+    from armreach_core.diagnostics.corpus import corpus_arm
+
+    spec = corpus_arm(arm)
+    if spec.path is None:
+        pytest.skip(f"{arm} is not installed: {spec.install}")
+    placed = {"base_position": (0.3, -1.2, 0.5), "base_orientation": (0.9, 0.1, -0.3, 0.3)} if arm == "ur5" else {}
+    robot = RobotModel(str(spec.path), **spec.options(), **placed)
+    q = robot.sample_configurations(np.random.default_rng(8), 16)
+    links = robot.link_transforms(q)
+    origins, axes, children = robot.chain_poses(q)
+    chain = [joint for joint in robot.tree_joints if 0 <= joint.index < robot.arm_dof]
+    for joint in chain:
+        frame = links[joint.parent] @ joint.origin
+        assert np.allclose(children[:, joint.index], links[joint.child], rtol=0, atol=1e-12), joint.name
+        assert np.allclose(origins[:, joint.index], frame[:, :3, 3], rtol=0, atol=1e-12), joint.name
+        assert np.allclose(axes[:, joint.index], frame[:, :3, :3] @ joint.axis, rtol=0, atol=1e-12), joint.name
+    assert np.allclose(robot.ee_transform(q), links[robot.ee_link], rtol=0, atol=1e-12)
+    eps = 1e-6
+    for k in range(4):
+        numeric = np.stack(
+            [
+                (robot.forward_kinematics(q[k] + eps * e) - robot.forward_kinematics(q[k] - eps * e)) / (2 * eps)
+                for e in np.eye(robot.dof)
+            ],
+            axis=-1,
+        )
+        assert np.allclose(robot.jacobian(q[k]), numeric, rtol=0, atol=1e-7)
 
 
 def test_position_and_jacobian_come_from_one_walk_to_the_bit(ar6_urdf):

@@ -26,6 +26,7 @@ import numpy.typing as npt
 
 from armreach_core.errors import URDFError
 from armreach_core.robot.anatomy import MOVABLE_TYPES, Tree, default_end_effector
+from armreach_core.robot.chain import SerialChain
 from armreach_core.robot.joints import (
     HeldJoint,
     JointSpec,
@@ -37,9 +38,9 @@ from armreach_core.robot.joints import (
     tool_joint,
     tree_joints,
 )
-from armreach_core.robot.placement import cross, pose_matrix
+from armreach_core.robot.placement import pose_matrix
 from armreach_core.robot.urdf import ParsedURDF
-from armreach_core.robot.walk import Frames, joint_motion, serial_frames, walk
+from armreach_core.robot.walk import joint_motion, walk
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -200,6 +201,7 @@ class ArmKinematics:
         self.tree_joints: tuple[TreeJoint, ...] = tree_joints(self._tree, self.joint_names, self.held_joints)
         on_chain = set(chain)
         self._chain: tuple[TreeJoint, ...] = tuple(j for j in self.tree_joints if j.name in on_chain)
+        self._serial = SerialChain(self.base_transform, self._chain)
         #: links joined to the root by fixed joints only: they never move
         self.fixed_links: frozenset[str] = self._fixed_links(robot.joints)
 
@@ -289,24 +291,6 @@ class ArmKinematics:
         """:func:`~armreach_core.robot.walk.walk` from this arm's root link and base placement."""
         return walk(self.root_link, self.base_transform, joints, q, held)
 
-    def _frames(self, q: FloatArray, children: list[FloatArray] | None = None) -> tuple[FloatArray, Frames]:
-        """World transform of the end-effector link and, per actuated chain joint, (origin, axis, kind).
-
-        ``children``, when given, receives each actuated chain joint's child-link transform.
-        """
-        if q.ndim == 1:  # the chain is the path from the root to the end effector: each joint hangs from the last
-            return serial_frames(self.base_transform, self._chain, q, children)
-        transform = np.broadcast_to(self.base_transform, (*q.shape[:-1], 4, 4))
-        joint_frames: Frames = []
-        for joint, frame, child in self._walk(q, self._chain):
-            transform = child
-            if joint.index < 0:
-                continue
-            joint_frames.append((frame[..., :3, 3].copy(), frame[..., :3, :3] @ joint.axis, joint.kind))
-            if children is not None:
-                children.append(child)
-        return transform, joint_frames
-
     def link_transforms(self, q: npt.ArrayLike) -> dict[str, FloatArray]:
         """World transforms of every link for joint vectors ``q`` (dof,) or (batch, dof).
 
@@ -320,11 +304,20 @@ class ArmKinematics:
             frames[joint.child] = child
         return frames
 
+    def chain_poses(self, q: npt.ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Per actuated chain joint, in chain order, for joint vectors ``q`` (dof,) or (batch, dof): its
+        origin and unit axis in the world, (..., arm_dof, 3) each, and its child link's world
+        transform, (..., arm_dof, 4, 4)."""
+        values = self._check_q(q)
+        children = self._serial.children(values)
+        origins, axes = self._serial.joint_frames(values, children)
+        return origins, axes, children
+
     def chain_frames(self, q: npt.ArrayLike) -> tuple[list[tuple[FloatArray, FloatArray, str]], list[FloatArray]]:
         """Per actuated chain joint: (origin, axis, kind) in the world, and its child link's 4x4 world transform."""
-        children: list[FloatArray] = []
-        _, frames = self._frames(self._check_q(q), children)
-        return frames, children
+        origins, axes, children = self.chain_poses(q)
+        frames = [(origins[..., i, :], axes[..., i, :], kind) for i, kind in enumerate(self._serial.kinds)]
+        return frames, [children[..., i, :, :] for i in range(len(self._serial))]
 
     def chain_index_of(self, link: str) -> int | None:
         """Index of the actuated chain joint that ``link`` moves with (the nearest above it), or ``None``."""
@@ -339,13 +332,11 @@ class ArmKinematics:
     def forward_kinematics(self, q: npt.ArrayLike) -> FloatArray:
         """End-effector position (m) for joint angles ``q`` of shape (dof,) or (batch, dof), in the world
         frame: the root link's frame moved by the base placement (:attr:`base_transform`)."""
-        transform, _ = self._frames(self._check_q(q))
-        return transform[..., :3, 3]
+        return self.ee_transform(q)[..., :3, 3]
 
     def ee_transform(self, q: npt.ArrayLike) -> FloatArray:
         """4x4 homogeneous transform of the end-effector link in the world for ``q`` (batch-friendly)."""
-        transform, _ = self._frames(self._check_q(q))
-        return transform
+        return self._serial.end(self._serial.children(self._check_q(q)))
 
     def jacobian(self, q: npt.ArrayLike) -> FloatArray:
         """Positional Jacobian d(ee position)/dq in the world frame, shape (3, dof) or (batch, 3, dof)."""
@@ -353,16 +344,7 @@ class ArmKinematics:
 
     def position_and_jacobian(self, q: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
         """:meth:`forward_kinematics` and :meth:`jacobian` from one walk of the chain (for IK)."""
-        transform, frames = self._frames(self._check_q(q))
-        ee = transform[..., :3, 3]
-        jac = np.zeros((*ee.shape[:-1], 3, self.dof))  # tool joints do not move the end effector
-        if frames:  # one cross product for every column (a call per column costs more than the physics step)
-            origins = np.stack([origin for origin, _, _ in frames], axis=-2)
-            axes = np.stack([axis for _, axis, _ in frames], axis=-2)
-            prismatic = np.array([kind == "prismatic" for _, _, kind in frames])[:, None]
-            columns = np.where(prismatic, axes, cross(axes, ee[..., None, :] - origins))
-            jac[..., : len(frames)] = np.swapaxes(columns, -1, -2)
-        return ee, jac
+        return self._serial.position_and_jacobian(self._check_q(q), self.dof)
 
     def clip(self, q: npt.ArrayLike) -> FloatArray:
         """``q`` clipped into the joint limits."""

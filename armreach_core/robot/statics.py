@@ -20,6 +20,7 @@ import numpy.typing as npt
 
 from armreach_core.robot.joints import DEFAULT_EFFORT_LIMIT, JointSpec
 from armreach_core.robot.kinematics import ArmKinematics, FloatArray
+from armreach_core.robot.placement import cross
 
 #: Standard gravity in the world frame (m/s²), as both engines use it.
 GRAVITY = np.array([0.0, 0.0, -9.81])
@@ -81,20 +82,32 @@ def mass_model(robot: ArmKinematics, bare_link_mass: float = 0.0) -> MassModel:
     return MassModel(masses, centers)
 
 
+def _suffix(values: FloatArray) -> FloatArray:
+    """Sums over the chain from each joint down: ``out[..., j, :] = values[..., j:, :].sum(-2)``."""
+    return np.cumsum(values[..., ::-1, :], axis=-2)[..., ::-1, :]
+
+
+def _carried(robot: ArmKinematics, q: npt.ArrayLike, bare_link_mass: float) -> tuple[FloatArray, ...]:
+    """At ``q``, per arm joint (..., arm_dof, ...): its origin and axis in the world, and the mass it
+    carries (kg) and that mass's first moment about the world origin (kg·m), from its child segment down."""
+    model = mass_model(robot, bare_link_mass)
+    origins, axes, children = robot.chain_poses(q)
+    centers = (children[..., :3, :3] @ model.centers[:, :, None])[..., 0] + children[..., :3, 3]
+    masses = np.broadcast_to(model.masses[:, None], centers.shape)
+    return origins, axes, _suffix(masses)[..., 0], _suffix(masses * centers)
+
+
 def gravity_torques(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:
-    """Torque (N·m; N for prismatic joints) each arm joint applies to hold ``q`` still, shape (..., arm_dof)."""
-    model = mass_model(robot)
-    frames, children = robot.chain_frames(q)
-    centers = [child[..., :3, :3] @ model.centers[k] + child[..., :3, 3] for k, child in enumerate(children)]
-    weights = model.masses[:, None] * GRAVITY  # (n, 3)
-    torques = []
-    for j, (origin, axis, kind) in enumerate(frames):
-        total = np.zeros(np.shape(origin)[:-1])
-        for k in range(j, len(children)):
-            lever = weights[k] if kind == "prismatic" else np.cross(centers[k] - origin, weights[k])
-            total = total + np.sum(axis * lever, axis=-1)
-        torques.append(-total)  # the joint opposes gravity's moment
-    return np.stack(torques, axis=-1)
+    """Torque (N·m; N for prismatic joints) each arm joint applies to hold ``q`` still, shape (..., arm_dof).
+
+    Gravity's moment about joint j's origin is that of the mass it carries, at its centre:
+    ``(first moment - mass o_j) x g``, with the sums taken down the chain once for every joint."""
+    origins, axes, mass, moment = _carried(robot, q, 0.0)
+    weight = mass[..., None] * GRAVITY  # (..., n, 3)
+    lever = cross(moment - mass[..., None] * origins, np.broadcast_to(GRAVITY, moment.shape))
+    prismatic = np.array([joint.type == "prismatic" for joint in robot.joints[: robot.arm_dof]])[:, None]
+    moments = np.sum(axes * np.where(prismatic, weight, lever), axis=-1)
+    return np.asarray(-moments, dtype=np.float64)  # the joint opposes gravity's moment
 
 
 def carried_torques(robot: ArmKinematics, q: npt.ArrayLike, bare_link_mass: float = 0.0) -> FloatArray:
@@ -104,18 +117,12 @@ def carried_torques(robot: ArmKinematics, q: npt.ArrayLike, bare_link_mass: floa
     For a joint whose axis is horizontal it is :func:`gravity_torques`'s largest over a turn of the base.
     ``bare_link_mass``: as in :func:`mass_model`.
     """
-    model = mass_model(robot, bare_link_mass)
-    frames, children = robot.chain_frames(q)
-    centers = [child[..., :3, :3] @ model.centers[k] + child[..., :3, 3] for k, child in enumerate(children)]
+    origins, axes, mass, moment = _carried(robot, q, bare_link_mass)
     g = float(np.linalg.norm(GRAVITY))
-    torques = []
-    for j, (origin, axis, kind) in enumerate(frames):
-        if kind == "prismatic":
-            torques.append(np.full(np.shape(origin)[:-1], g * float(model.masses[j:].sum())))
-            continue
-        moment = sum((model.masses[k] * (centers[k] - origin) for k in range(j, len(children))), np.zeros(3))
-        torques.append(g * np.linalg.norm(np.cross(axis, moment), axis=-1))
-    return np.stack(torques, axis=-1)
+    about = moment - mass[..., None] * origins
+    turning = g * np.linalg.norm(cross(axes, about), axis=-1)
+    prismatic = np.array([joint.type == "prismatic" for joint in robot.joints[: robot.arm_dof]])
+    return np.asarray(np.where(prismatic, g * mass, turning), dtype=np.float64)
 
 
 def sized_efforts(robot: ArmKinematics) -> tuple[JointSpec, ...]:

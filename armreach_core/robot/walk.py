@@ -1,9 +1,9 @@
 """Walking a URDF's joint tree: each joint's frame and its child link's transform in the world.
 
-:func:`walk` is the one forward-kinematics implementation, for batches of joint vectors;
-:func:`serial_frames` is its special case for one joint vector on the chain to a link, the hot path
-of the IK reference and its solves, with the same products in the same order (so the same
-numbers to the bit). :class:`~armreach_core.robot.kinematics.ArmKinematics` walks through them.
+:func:`walk` is the tree's forward kinematics, for a joint vector or a batch of them: every
+link's transform, joint by joint. The chain to the end effector, the hot path of the IK reference
+and its solves, is :class:`~armreach_core.robot.chain.SerialChain`'s (the two agree to rounding).
+:class:`~armreach_core.robot.kinematics.ArmKinematics` goes through them.
 """
 
 from __future__ import annotations
@@ -17,8 +17,6 @@ from armreach_core.robot.joints import TreeJoint
 from armreach_core.robot.placement import rotation
 
 FloatArray = npt.NDArray[np.float64]
-#: Per actuated chain joint: its origin and axis in the world, and its kind.
-Frames = list[tuple[FloatArray, FloatArray, str]]
 
 
 def joint_motion(kind: str, axis: FloatArray, value: FloatArray) -> FloatArray:
@@ -59,28 +57,3 @@ def walk(
             child = frame @ joint_motion(joint.kind, joint.axis, value)
         frames[joint.child] = child
         yield joint, frame, child
-
-
-def serial_frames(
-    base_transform: FloatArray, chain: tuple[TreeJoint, ...], q: FloatArray, children: list[FloatArray] | None
-) -> tuple[FloatArray, Frames]:
-    """For one joint vector ``q`` on ``chain``, the path of joints from the root link down (each
-    hanging from the link the one before it moves): the last link's world
-    transform and each actuated joint's frame, ``children`` receiving their child links'
-    transforms; :func:`walk`'s products without its batch handling and its table of links.
-    Joints the vector does not actuate stay at zero."""
-    transform = base_transform
-    joint_frames: Frames = []
-    for joint in chain:
-        frame = transform @ joint.origin
-        if joint.kind == "fixed":
-            transform = frame
-            continue
-        value = q[joint.index] if joint.index >= 0 else np.zeros(())
-        transform = frame @ joint_motion(joint.kind, joint.axis, value)
-        if joint.index < 0:
-            continue
-        joint_frames.append((frame[:3, 3].copy(), frame[:3, :3] @ joint.axis, joint.kind))
-        if children is not None:
-            children.append(transform)
-    return transform, joint_frames
