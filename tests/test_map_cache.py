@@ -1,4 +1,5 @@
-"""Reachability maps kept on disk: read back exactly, keyed by what they depend on, rebuilt when unreadable."""
+"""Derived data kept on disk: reachability maps (read back exactly, keyed by what they depend on, rebuilt
+when unreadable), the voxels clear of the arm, and collision meshes' hull vertices."""
 
 from __future__ import annotations
 
@@ -76,3 +77,66 @@ def test_a_cache_folder_that_cannot_be_written_only_costs_the_build(cache: Path)
     cache.parent.write_text("a file where the cache folder would be")  # no folder can be made under it, even by root
     assert reachability_map(RobotModel(BUNDLED_URDF)).grid.any()
     assert cache.parent.is_file()
+
+
+def test_the_clear_voxels_are_kept_beside_the_map_one_entry_per_margin(
+    cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The voxels clear of the arm at home cost a detailed arm's every process its hulls against every
+    voxel (the Vega's 0.9 s): they are stored under the map's key and the margin, and read back as
+    computed."""
+    from armreach_core.robot import workspace
+
+    robot = RobotModel(BUNDLED_URDF)
+    calls: list[int] = []
+    real = workspace.clearance
+
+    def counted(*args: object) -> np.ndarray:
+        calls.append(1)
+        return real(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(workspace, "clearance", counted)
+    workspace._clear_voxels.cache_clear()
+    clear = workspace._clear_voxels(robot, 0.05)
+    assert 0 < clear.sum() < reachability_map(robot).grid.sum()  # some interior voxels lie too near the arm
+    assert len(list(cache.glob("*-clear-0.05.npz"))) == 1 and len(calls) == 1
+    workspace._clear_voxels.cache_clear()  # a new process: only the disk remembers
+    reachability_map.cache_clear()
+    np.testing.assert_array_equal(workspace._clear_voxels(robot, 0.05), clear)
+    assert len(calls) == 1
+    wider = workspace._clear_voxels(robot, 0.1)  # another margin: computed, and stored apart
+    assert len(calls) == 2 and wider.sum() < clear.sum()
+    assert len(list(cache.glob("*-clear-*.npz"))) == 2
+    workspace._clear_voxels.cache_clear()
+
+
+def test_a_meshs_hull_vertices_are_kept_on_disk_by_its_bytes(cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Reading a collision mesh and taking its hull cost every process that builds the arm's env (the
+    Vega's 16 meshes, 0.9 s): the vertices are stored under the file's bytes, read back exactly, and an
+    edited file gets its own."""
+    import trimesh
+
+    from armreach_core.robot import geometry
+
+    mesh = cache.parent.parent / "part.stl"
+    trimesh.creation.box(extents=(0.1, 0.2, 0.3)).export(mesh)
+    geometry._mesh_hull.cache_clear()
+    vertices = geometry._mesh_hull(str(mesh))
+    assert vertices is not None and vertices.shape == (8, 3)
+    assert len(list((cache.parent / "hulls").glob("part-*-vertices.npz"))) == 1
+    geometry._mesh_hull.cache_clear()  # a new process
+
+    def unreadable(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the mesh was read again")
+
+    with monkeypatch.context() as patched:
+        patched.setattr(trimesh, "load", unreadable)
+        again = geometry._mesh_hull(str(mesh))
+    assert again is not None
+    np.testing.assert_array_equal(again, vertices)
+    trimesh.creation.box(extents=(0.4, 0.2, 0.3)).export(mesh)  # edited: its own entry, its own hull
+    geometry._mesh_hull.cache_clear()
+    edited = geometry._mesh_hull(str(mesh))
+    assert edited is not None and np.ptp(edited[:, 0]) == pytest.approx(0.4)
+    assert len(list((cache.parent / "hulls").glob("part-*-vertices.npz"))) == 2
+    geometry._mesh_hull.cache_clear()

@@ -23,7 +23,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from armreach_core.errors import ConfigError
-from armreach_core.robot.hulls import cache_dir
+from armreach_core.robot.cache_files import cache_dir
 
 if TYPE_CHECKING:
     import numpy.typing as npt

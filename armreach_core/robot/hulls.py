@@ -23,7 +23,6 @@ degenerate, is left as it is (logged).
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import os
 from pathlib import Path
@@ -31,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 from lxml import etree
 
+from armreach_core.robot.cache_files import cache_dir, file_key
 from armreach_core.robot.geometry import hull_points
 from armreach_core.robot.inertia import hull_inertia, massless_frames, repair_inertials
 
@@ -45,32 +45,6 @@ HULL_TOLERANCE = 1e-3
 SMALL_HULL = 64
 #: The most vertices a simplified hull keeps (``PhysicsConfig.hull_vertices``'s default).
 MAX_HULL_VERTICES = 128
-
-
-def cache_dir(kind: str) -> Path:
-    """armreach's cache folder for ``kind`` (``$XDG_CACHE_HOME/armreach/<kind>``, default under ``~/.cache``)."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "armreach" / kind
-
-
-def file_key(path: Path) -> str:
-    """A short key of the bytes of the file at ``path``: copies of a mesh (another clone, a
-    package installed twice) share their cache entries, and an edited file gets a new one.
-    Each file is read once per process while its size and modification time stay. A ``.gltf``
-    may keep its geometry in files beside it, so its key is its path's too."""
-    stat = path.stat()
-    stamp = (str(path), stat.st_mtime_ns, stat.st_size)
-    key = _KEYS.get(stamp)
-    if key is None:
-        digest = hashlib.sha1(str(path).encode() if path.suffix.lower() == ".gltf" else b"")
-        with open(path, "rb") as handle:
-            for block in iter(lambda: handle.read(1 << 20), b""):
-                digest.update(block)
-        key = _KEYS[stamp] = digest.hexdigest()[:16]
-    return key
-
-
-_KEYS: dict[tuple[str, int, int], str] = {}
 
 
 def convex_hull(path: Path, max_vertices: int | None = MAX_HULL_VERTICES) -> Path:

@@ -17,15 +17,13 @@ from __future__ import annotations
 import functools
 import hashlib
 import logging
-import os
-import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
-from armreach_core.robot.hulls import cache_dir
+from armreach_core.robot.cache_files import cache_dir, load_arrays, store_arrays
 
 if TYPE_CHECKING:
     from armreach_core.robot.model import RobotModel
@@ -70,18 +68,14 @@ def _path(robot: RobotModel, key: str) -> Path:
     return cache_dir(CACHE_KIND) / f"{stem}-{key}.npz"
 
 
-def load(robot: RobotModel, key: str) -> dict[str, npt.NDArray[np.generic]] | None:
-    """The stored arrays of the map with ``key``, or None when there is none or it cannot be read."""
+def load(robot: RobotModel, key: str, fields: tuple[str, ...] = FIELDS) -> dict[str, npt.NDArray[np.generic]] | None:
+    """The stored arrays of the map with ``key`` (``fields`` of it: a map's by default), or None when
+    there is none or it cannot be read."""
     path = _path(robot, key)
-    if not path.is_file():
+    arrays = load_arrays(path, fields, log)
+    if arrays is None:
         return None
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {name: np.asarray(data[name]) for name in FIELDS}
-    except (OSError, ValueError, KeyError) as exc:
-        log.info("reachability map %s unreadable (%s): building it again", path, exc)
-        return None
-    if arrays["grid"].dtype != np.bool_ or arrays["grid"].ndim != 3 or arrays["origin"].shape != (3,):
+    if arrays["grid"].dtype != np.bool_ or arrays["grid"].ndim != 3 or arrays.get("origin", np.zeros(3)).shape != (3,):
         log.info("reachability map %s is not a map: building it again", path)
         return None
     return arrays
@@ -89,19 +83,7 @@ def load(robot: RobotModel, key: str) -> dict[str, npt.NDArray[np.generic]] | No
 
 def store(robot: RobotModel, key: str, arrays: dict[str, npt.NDArray[np.generic]]) -> None:
     """Write the map's ``arrays`` under ``key`` (atomically; a folder that cannot be written is logged and skipped)."""
-    path = _path(robot, key)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
-        try:
-            with os.fdopen(fd, "wb") as out:
-                np.savez_compressed(out, **arrays)  # type: ignore[arg-type]
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-    except OSError as exc:
-        log.info("reachability map not cached in %s: %s", path.parent, exc)
+    store_arrays(_path(robot, key), arrays, log)
 
 
 __all__ = ["CACHE_KIND", "load", "map_key", "store"]

@@ -3,7 +3,7 @@
 PyBullet reads ``.obj``, ``.stl`` and ``.dae``; MuJoCo ``.obj``, ``.stl`` and ``.msh``. A
 description may use any format trimesh reads (glTF/GLB, PLY, OFF, 3MF, DAE for MuJoCo...):
 such a mesh is converted once to ``.obj`` (all its parts, their transforms applied) into the
-cache the hulls use (:func:`armreach_core.robot.hulls.cache_dir`), keyed by the file's name
+cache the hulls use (:func:`armreach_core.robot.cache_files.cache_dir`), keyed by the file's name
 and contents. A collision mesh becomes its convex hull first
 (:mod:`armreach_core.robot.hulls`), which is already an ``.obj``.
 
@@ -22,7 +22,8 @@ from typing import Any
 from lxml import etree
 
 from armreach_core.errors import URDFError
-from armreach_core.robot.hulls import cache_dir, file_key, write_obj
+from armreach_core.robot.cache_files import cache_dir, file_key
+from armreach_core.robot.hulls import write_obj
 
 log = logging.getLogger("armreach.meshes")
 

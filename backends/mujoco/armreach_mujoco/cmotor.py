@@ -41,7 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 from armreach_core.errors import ArmReachError
-from armreach_core.robot.hulls import cache_dir
+from armreach_core.robot.cache_files import cache_dir
 from armreach_mujoco.engine import log, mujoco
 
 #: Environment variable: ``python`` runs the motors' Python loop instead of the compiled callback.
