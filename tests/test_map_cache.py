@@ -83,8 +83,8 @@ def test_the_clear_voxels_are_kept_beside_the_map_one_entry_per_margin(
     cache: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The voxels clear of the arm at home cost a detailed arm's every process its hulls against every
-    voxel (the Vega's 0.9 s): they are stored under the map's key and the margin, and read back as
-    computed."""
+    voxel (the Vega's 0.9 s): they are stored under the map's key, the hulls and the margin, and read
+    back as computed."""
     from armreach_core.robot import workspace
 
     robot = RobotModel(BUNDLED_URDF)
@@ -99,7 +99,7 @@ def test_the_clear_voxels_are_kept_beside_the_map_one_entry_per_margin(
     workspace._clear_voxels.cache_clear()
     clear = workspace._clear_voxels(robot, 0.05)
     assert 0 < clear.sum() < reachability_map(robot).grid.sum()  # some interior voxels lie too near the arm
-    assert len(list(cache.glob("*-clear-0.05.npz"))) == 1 and len(calls) == 1
+    assert len(list(cache.glob("*-clear-*-0.05.npz"))) == 1 and len(calls) == 1
     workspace._clear_voxels.cache_clear()  # a new process: only the disk remembers
     reachability_map.cache_clear()
     np.testing.assert_array_equal(workspace._clear_voxels(robot, 0.05), clear)
@@ -107,6 +107,12 @@ def test_the_clear_voxels_are_kept_beside_the_map_one_entry_per_margin(
     wider = workspace._clear_voxels(robot, 0.1)  # another margin: computed, and stored apart
     assert len(calls) == 2 and wider.sum() < clear.sum()
     assert len(list(cache.glob("*-clear-*.npz"))) == 2
+    # links of another shape (a mesh edited in place: the same description, the same map): computed anew
+    real_hulls = workspace.home_hulls
+    monkeypatch.setattr(workspace, "home_hulls", lambda r: tuple(h - [0, 0, 0, 0.01] for h in real_hulls(r)))
+    workspace._clear_voxels.cache_clear()
+    grown = workspace._clear_voxels(robot, 0.05)
+    assert len(calls) == 3 and grown.sum() < clear.sum()
     workspace._clear_voxels.cache_clear()
 
 

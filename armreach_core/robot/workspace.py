@@ -17,6 +17,7 @@ coarser for arms over ~6 m so that the map stays small in memory.
 from __future__ import annotations
 
 import functools
+import hashlib
 import logging
 
 import numpy as np
@@ -163,17 +164,18 @@ def home_hulls(robot: RobotModel) -> tuple[FloatArray, ...]:
 @functools.lru_cache(maxsize=32)
 def _clear_voxels(robot: RobotModel, margin: float) -> npt.NDArray[np.bool_]:
     """The reachability map's interior voxels whose centres keep ``margin`` from :func:`home_hulls`
-    (cached, and on disk beside the map: a detailed arm's hulls against every voxel took the Vega
-    0.9 s in each process)."""
-    built = reachability_map(robot)
-    key = f"{map_cache.map_key(robot, VOXEL, SAMPLES)}-clear-{margin!r}"
+    (cached, and on disk beside the map, keyed by the map's key, the hulls themselves and the
+    margin: a detailed arm's hulls against every voxel took the Vega 0.9 s in each process)."""
+    built, hulls = reachability_map(robot), home_hulls(robot)
+    digest = hashlib.sha1(b"".join(np.ascontiguousarray(hull).tobytes() for hull in hulls)).hexdigest()[:12]
+    key = f"{map_cache.map_key(robot, VOXEL, SAMPLES)}-clear-{digest}-{margin!r}"
     stored = map_cache.load(robot, key, ("grid",))
     if stored is not None and stored["grid"].shape == built.grid.shape:
         return np.asarray(stored["grid"], dtype=np.bool_)
     grid = built.grid.copy()
     cells = np.argwhere(grid)
     centres = (cells + built.origin + 0.5) * built.voxel
-    grid[tuple(cells.T)] = clearance(home_hulls(robot), centres) > margin
+    grid[tuple(cells.T)] = clearance(hulls, centres) > margin
     map_cache.store(robot, key, {"grid": grid})
     return grid
 
