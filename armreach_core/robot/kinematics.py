@@ -313,12 +313,6 @@ class ArmKinematics:
         origins, axes = self._serial.joint_frames(values, children)
         return origins, axes, children
 
-    def chain_frames(self, q: npt.ArrayLike) -> tuple[list[tuple[FloatArray, FloatArray, str]], list[FloatArray]]:
-        """Per actuated chain joint: (origin, axis, kind) in the world, and its child link's 4x4 world transform."""
-        origins, axes, children = self.chain_poses(q)
-        frames = [(origins[..., i, :], axes[..., i, :], kind) for i, kind in enumerate(self._serial.kinds)]
-        return frames, [children[..., i, :, :] for i in range(len(self._serial))]
-
     def chain_index_of(self, link: str) -> int | None:
         """Index of the actuated chain joint that ``link`` moves with (the nearest above it), or ``None``."""
         chain = {name: i for i, name in enumerate(self.joint_names[: self.arm_dof])}

@@ -121,8 +121,8 @@ class RobotModel(ArmKinematics):
         the length of the chain below it: a mobile base given as joints, or a gantry's rail (ManiSkill's
         Fetch: 40 m rails under a 1.9 m torso and arm), whose targets would fill a ball of that size."""
         q = self.clip(np.zeros(self.dof))
-        frames, _ = self.chain_frames(q)
-        points = [np.asarray(origin) for origin, _, _ in frames] + [self.forward_kinematics(q)]
+        origins, _, _ = self.chain_poses(q)
+        points = [*origins, self.forward_kinematics(q)]
         for i, joint in enumerate(self.joints[: self.arm_dof]):
             if joint.type != "prismatic":
                 continue

@@ -60,7 +60,7 @@ def mass_model(robot: ArmKinematics, bare_link_mass: float = 0.0) -> MassModel:
     n = robot.arm_dof
     reference = robot.clip(np.zeros(robot.dof))
     links = robot.link_transforms(reference)
-    _, children = robot.chain_frames(reference)
+    _, _, children = robot.chain_poses(reference)
     masses = np.zeros(n)
     moments = np.zeros((n, 3))
     for link in robot.link_names:
@@ -87,6 +87,11 @@ def _suffix(values: FloatArray) -> FloatArray:
     return np.cumsum(values[..., ::-1, :], axis=-2)[..., ::-1, :]
 
 
+def _prismatic(robot: ArmKinematics) -> npt.NDArray[np.bool_]:
+    """Which arm joints slide."""
+    return np.array([joint.type == "prismatic" for joint in robot.joints[: robot.arm_dof]])
+
+
 def _carried(robot: ArmKinematics, q: npt.ArrayLike, bare_link_mass: float) -> tuple[FloatArray, ...]:
     """At ``q``, per arm joint (..., arm_dof, ...): its origin and axis in the world, and the mass it
     carries (kg) and that mass's first moment about the world origin (kg·m), from its child segment down."""
@@ -105,8 +110,7 @@ def gravity_torques(robot: ArmKinematics, q: npt.ArrayLike) -> FloatArray:
     origins, axes, mass, moment = _carried(robot, q, 0.0)
     weight = mass[..., None] * GRAVITY  # (..., n, 3)
     lever = cross(moment - mass[..., None] * origins, np.broadcast_to(GRAVITY, moment.shape))
-    prismatic = np.array([joint.type == "prismatic" for joint in robot.joints[: robot.arm_dof]])[:, None]
-    moments = np.sum(axes * np.where(prismatic, weight, lever), axis=-1)
+    moments = np.sum(axes * np.where(_prismatic(robot)[:, None], weight, lever), axis=-1)
     return np.asarray(-moments, dtype=np.float64)  # the joint opposes gravity's moment
 
 
@@ -121,8 +125,7 @@ def carried_torques(robot: ArmKinematics, q: npt.ArrayLike, bare_link_mass: floa
     g = float(np.linalg.norm(GRAVITY))
     about = moment - mass[..., None] * origins
     turning = g * np.linalg.norm(cross(axes, about), axis=-1)
-    prismatic = np.array([joint.type == "prismatic" for joint in robot.joints[: robot.arm_dof]])
-    return np.asarray(np.where(prismatic, g * mass, turning), dtype=np.float64)
+    return np.asarray(np.where(_prismatic(robot), g * mass, turning), dtype=np.float64)
 
 
 def sized_efforts(robot: ArmKinematics) -> tuple[JointSpec, ...]:
